@@ -1,0 +1,1 @@
+"""The paper's baselines (random, linear RLS, eNAC, FDG, PoWER, pure RL, hybrid)."""

@@ -1,0 +1,1 @@
+"""Benchmarks behind `rlfd bench ...`; each writes JSON to results/."""

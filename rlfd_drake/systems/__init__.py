@@ -1,0 +1,1 @@
+"""Drake LeafSystems of the rLfD diagram, one per file."""
