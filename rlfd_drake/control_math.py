@@ -1,0 +1,287 @@
+"""Pure maths of the rLfD control systems (numpy only, no pydrake).
+
+The LeafSystems in ``rlfd_drake.systems`` read their Context and call these
+functions; everything here is unit-tested directly.
+
+Conventions: quaternions are ``[w, x, y, z]`` (see ``rlfd_drake.geometry``); a
+spatial velocity or wrench is ``[angular; linear]`` (Drake's SpatialVelocity /
+SpatialForce order); rotation vectors are full-angle (``angle * unit_axis``, rad)
+and world-frame where they perturb a pose from the left, ``q = exp(r) o q_ref``.
+
+Contents:
+
+* Hermite polynomial fit/eval (the extrapolator's quintic through the last three
+  DMP samples, positions and velocities);
+* the left Jacobian of SO(3) and its inverse (rotation-vector rates <-> angular
+  velocity), for fitting orientations on the manifold;
+* residual scaling and composition (Section III-D of the paper);
+* the Cartesian impedance law with gravity compensation and a null-space posture
+  term, and critical damping from the operational-space inertia.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rlfd_drake.geometry import quat_multiply
+
+# ---------------------------------------------------------------------------
+# Hermite polynomial fit / evaluation
+# ---------------------------------------------------------------------------
+
+
+def hermite_matrix(sample_times: np.ndarray) -> np.ndarray:
+    """The (2n, 2n) matrix mapping polynomial coefficients to Hermite conditions.
+
+    For n sample times t_j and the polynomial ``p(t) = sum_k c_k t^k`` of degree
+    2n - 1, row j is ``p(t_j)`` and row n + j is ``p'(t_j)``.
+
+    Args:
+        sample_times: (n,) distinct times (any unit; scale them to O(1) for good
+            conditioning, e.g. in units of the sample period).
+    """
+    t = np.asarray(sample_times, dtype=float).reshape(-1)
+    n = t.size
+    if n == 0:
+        raise ValueError("hermite_matrix needs at least one sample time")
+    if np.unique(t).size != n:
+        raise ValueError(f"sample times must be distinct, got {t}")
+    k = np.arange(2 * n, dtype=float)
+    values = t[:, None] ** k[None, :]
+    derivatives = np.zeros_like(values)
+    derivatives[:, 1:] = k[None, 1:] * t[:, None] ** (k[None, 1:] - 1.0)
+    return np.vstack([values, derivatives])
+
+
+def hermite_fit(
+    sample_times: np.ndarray, values: np.ndarray, derivatives: np.ndarray
+) -> np.ndarray:
+    """Coefficients of the degree 2n-1 polynomial through values and derivatives.
+
+    Args:
+        sample_times: (n,) distinct times.
+        values: (n, d) values at the sample times.
+        derivatives: (n, d) first derivatives (per unit of ``sample_times``).
+
+    Returns:
+        (2n, d) coefficients, lowest order first: ``p(t) = sum_k c[k] t^k``.
+        With n = 3 this is the quintic that reproduces any polynomial of degree
+        <= 5 exactly.
+    """
+    values = np.atleast_2d(np.asarray(values, dtype=float).T).T
+    derivatives = np.atleast_2d(np.asarray(derivatives, dtype=float).T).T
+    rhs = np.vstack([values, derivatives])
+    return np.linalg.solve(hermite_matrix(sample_times), rhs)
+
+
+def polynomial_eval(coefficients: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Value and first derivative of ``sum_k c[k] t^k``.
+
+    Args:
+        coefficients: (m, d) coefficients, lowest order first.
+        t: evaluation time (same unit as the fit).
+
+    Returns:
+        (value (d,), derivative (d,)).
+    """
+    m = coefficients.shape[0]
+    powers = t ** np.arange(m, dtype=float)
+    dpowers = np.zeros(m)
+    dpowers[1:] = np.arange(1, m, dtype=float) * powers[:-1]
+    return powers @ coefficients, dpowers @ coefficients
+
+
+# ---------------------------------------------------------------------------
+# SO(3) Jacobians
+# ---------------------------------------------------------------------------
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """(3, 3) cross-product matrix [w]x with [w]x u = w x u."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def so3_left_jacobian(r: np.ndarray) -> np.ndarray:
+    """(3, 3) left Jacobian of SO(3) at the rotation vector r (rad).
+
+    If ``R(t) = Exp(r(t)) R_ref`` then the world-frame angular velocity is
+    ``w = J_l(r) dr/dt``.
+    """
+    theta2 = float(r @ r)
+    S = skew(r)
+    if theta2 < 1e-10:
+        return np.eye(3) + 0.5 * S + (1.0 / 6.0) * (S @ S)
+    theta = np.sqrt(theta2)
+    a = (1.0 - np.cos(theta)) / theta2
+    b = (theta - np.sin(theta)) / (theta2 * theta)
+    return np.eye(3) + a * S + b * (S @ S)
+
+
+def so3_left_jacobian_apply(r: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``J_l(r) @ u`` (3,) without forming the matrix (scalar maths, for hot loops).
+
+    ``J_l(r) u = u + a (r x u) + b (r x (r x u))`` with ``a = (1 - cos t)/t^2``,
+    ``b = (t - sin t)/t^3``, ``t = |r|``.
+    """
+    rx, ry, rz = float(r[0]), float(r[1]), float(r[2])
+    ux, uy, uz = float(u[0]), float(u[1]), float(u[2])
+    theta2 = rx * rx + ry * ry + rz * rz
+    if theta2 < 1e-10:
+        a, b = 0.5, 1.0 / 6.0
+    else:
+        theta = math.sqrt(theta2)
+        a = (1.0 - math.cos(theta)) / theta2
+        b = (theta - math.sin(theta)) / (theta2 * theta)
+    cx, cy, cz = ry * uz - rz * uy, rz * ux - rx * uz, rx * uy - ry * ux
+    dx, dy, dz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+    return np.array([ux + a * cx + b * dx, uy + a * cy + b * dy, uz + a * cz + b * dz])
+
+
+def so3_left_jacobian_inverse(r: np.ndarray) -> np.ndarray:
+    """(3, 3) inverse of :func:`so3_left_jacobian`: ``dr/dt = J_l^-1(r) w``.
+
+    Valid for |r| < 2 pi (rotation vectors from a log map have |r| <= pi).
+    """
+    theta2 = float(r @ r)
+    S = skew(r)
+    if theta2 < 1e-10:
+        return np.eye(3) - 0.5 * S + (1.0 / 12.0) * (S @ S)
+    theta = np.sqrt(theta2)
+    c = 1.0 / theta2 - (1.0 + np.cos(theta)) / (2.0 * theta * np.sin(theta))
+    return np.eye(3) - 0.5 * S + c * (S @ S)
+
+
+# ---------------------------------------------------------------------------
+# Residual scaling and composition (paper Section III-D)
+# ---------------------------------------------------------------------------
+
+RESIDUAL_MODES: tuple[str, ...] = ("full", "translation", "orientation", "off")
+
+
+def scale_residual(
+    residual: np.ndarray, max_translation_m: float, max_rotation_rad: float, mode: str = "full"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Maps a normalised residual action to a physical pose correction.
+
+    Args:
+        residual: (6,) action; entries are clipped to [-1, 1]. The first three
+            scale to a translation, the last three to a rotation vector
+            ``alpha * r/|r|`` (angle-axis), alpha clipped to [0, pi].
+        max_translation_m: translation per unit action, m.
+        max_rotation_rad: rotation-vector component per unit action, rad.
+        mode: one of ``RESIDUAL_MODES``; "translation" zeroes the rotation,
+            "orientation" the translation, "off" both.
+
+    Returns:
+        (dp (3,) m, rotation vector (3,) rad), world frame.
+    """
+    if mode not in RESIDUAL_MODES:
+        raise ValueError(f"residual mode must be one of {RESIDUAL_MODES}, got {mode!r}")
+    a = np.clip(np.asarray(residual, dtype=float).reshape(6), -1.0, 1.0)
+    dp = a[:3] * max_translation_m if mode in ("full", "translation") else np.zeros(3)
+    if mode in ("full", "orientation"):
+        rotvec = a[3:] * max_rotation_rad
+        alpha = float(np.sqrt(rotvec @ rotvec))
+        if alpha > np.pi:
+            rotvec = rotvec * (np.pi / alpha)
+    else:
+        rotvec = np.zeros(3)
+    return dp, rotvec
+
+
+def residual_quaternion(rotvec: np.ndarray) -> np.ndarray:
+    """Q_delta = [cos(alpha/2), r/|r| sin(alpha/2)] for rotvec = alpha r/|r|."""
+    alpha = float(np.sqrt(rotvec @ rotvec))
+    if alpha == 0.0:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    half = 0.5 * alpha
+    return np.concatenate([[np.cos(half)], rotvec * (np.sin(half) / alpha)])
+
+
+def compose_residual_pose(
+    p_b: np.ndarray, Q_b: np.ndarray, dp: np.ndarray, rotvec: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Final set-point ``p_f = p_b + dp``, ``Q_f = Q_delta o Q_b``.
+
+    Args:
+        p_b: (3,) base position, m. Q_b: (4,) base quaternion [w, x, y, z].
+        dp: (3,) translation residual, m. rotvec: (3,) rotation residual, rad,
+            world frame (it multiplies Q_b from the left).
+
+    Returns:
+        (p_f (3,), Q_f (4,)). A zero residual returns copies of the inputs exactly.
+    """
+    p_f = p_b + dp
+    if not rotvec.any():
+        return p_f, np.array(Q_b, dtype=float)
+    return p_f, quat_multiply(residual_quaternion(rotvec), Q_b)
+
+
+# ---------------------------------------------------------------------------
+# Cartesian impedance
+# ---------------------------------------------------------------------------
+
+
+def operational_space_inertia(J: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """(6, 6) Lambda = (J M^-1 J^T)^-1 for a (6, n) Jacobian and (n, n) mass matrix."""
+    return np.linalg.inv(J @ np.linalg.solve(M, J.T))
+
+
+def critical_damping(
+    stiffness: np.ndarray, effective_inertia: np.ndarray, damping_ratio: float = 1.0
+) -> np.ndarray:
+    """Diagonal damping D_i = 2 zeta sqrt(K_i Lambda_i) (diagonal approximation).
+
+    Args:
+        stiffness: (6,) diagonal of K, [N m/rad]*3 + [N/m]*3.
+        effective_inertia: (6,) diagonal of Lambda, [kg m^2]*3 + [kg]*3.
+        damping_ratio: zeta.
+
+    Returns:
+        (6,) diagonal of D, [N m s/rad]*3 + [N s/m]*3.
+    """
+    return 2.0 * damping_ratio * np.sqrt(np.asarray(stiffness) * np.asarray(effective_inertia))
+
+
+def null_space_torque(J: np.ndarray, tau0: np.ndarray) -> np.ndarray:
+    """Projects tau0 (n,) with the simple projector N = I - J^T (J^+)^T.
+
+    J^+ = J^T (J J^T)^-1 (right pseudo-inverse of a full-row-rank (6, n) J), so
+    ``N tau0 = tau0 - J^T (J J^T)^-1 J tau0``. The result produces no wrench
+    at the controlled frame in static equilibrium: (J^+)^T N = 0.
+    """
+    return tau0 - J.T @ np.linalg.solve(J @ J.T, J @ tau0)
+
+
+def cartesian_impedance_torque(
+    J: np.ndarray,
+    pose_error: np.ndarray,
+    velocity_error: np.ndarray,
+    stiffness: np.ndarray,
+    damping: np.ndarray,
+    tau_posture: np.ndarray,
+    tau_gravity: np.ndarray,
+    torque_limits: np.ndarray,
+) -> np.ndarray:
+    """tau = J^T (K e + D (V_d - V)) + N tau_posture - tau_gravity, clipped.
+
+    Args:
+        J: (6, n) spatial-velocity Jacobian of the controlled frame E in the world,
+            rows [angular; linear].
+        pose_error: (6,) e = [rotation vector of Q_d o conj(Q); p_d - p] (rad, m), world.
+        velocity_error: (6,) V_d - V (rad/s, m/s), world; V_d = 0 without feed-forward.
+        stiffness: (6,) diagonal of K. damping: (6,) diagonal of D.
+        tau_posture: (n,) joint-space posture torque, projected into the null space.
+        tau_gravity: (n,) generalized gravity forces (Drake's
+            CalcGravityGeneralizedForces, i.e. the force gravity applies; it is
+            subtracted to compensate).
+        torque_limits: (n,) symmetric limits, N m.
+
+    Returns:
+        (n,) joint torques, N m.
+    """
+    wrench = stiffness * pose_error + damping * velocity_error
+    tau = J.T @ wrench + null_space_torque(J, tau_posture) - tau_gravity
+    return np.clip(tau, -torque_limits, torque_limits)

@@ -1,0 +1,304 @@
+"""BuildRlfdDiagram: the multi-rate rLfD diagram of one task.
+
+    DmpSystem (100 Hz) -> QuinticExtrapolator (samples at 100 Hz, read at 500 Hz)
+      -> ResidualComposer (residual held, 10 Hz) -> CartesianImpedanceController (500 Hz)
+      -> MultibodyPlant (Panda + part + fixture, hydroelastic, 2 ms) -> Observer
+
+The residual comes either from the exported input port ``residual`` (the Gym env
+drives it) or from a :class:`ResidualPolicy` inside the diagram (deployment). The
+controller only knows the arm and its payload; the DMP only knows the demonstration
+(its goal is the demonstrated, nominal one); only the plant knows where the fixture
+really is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from pydrake.geometry import Meshcat
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, PassThrough, VectorLogSink
+
+from rlfd_drake.dmp import CartesianDmp
+from rlfd_drake.scene import AddRlfdScene, Scene, SceneConfig, SolvePandaIK
+from rlfd_drake.systems.composer import ResidualComposer, ResidualComposerConfig
+from rlfd_drake.systems.dmp_system import DmpSystem
+from rlfd_drake.systems.extrapolator import QuinticExtrapolator, QuinticExtrapolatorConfig
+from rlfd_drake.systems.impedance import (
+    CartesianImpedanceConfig,
+    CartesianImpedanceController,
+    MakePandaControlModel,
+)
+from rlfd_drake.systems.observer import OBSERVATION_SIZE, Observer, ObserverConfig
+from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
+from rlfd_drake.tasks import TaskSpec
+
+#: The residual's dimension: translation (3) then angle-axis (3), in [-1, 1].
+RESIDUAL_SIZE = 6
+
+
+@dataclass
+class RlfdDiagramConfig:
+    """Rates and gains of the rLfD diagram (the paper's by default).
+
+    Attributes:
+        scene: plant and contact configuration (plant step 2 ms).
+        dmp_period_s: DMP base policy period (100 Hz).
+        impedance: Cartesian impedance controller (500 Hz).
+        extrapolator: quintic extrapolation of the DMP set-points.
+        residual_mode: "full", "translation", "orientation" or "off".
+        max_translation_m, max_rotation_rad: physical bounds of a residual of 1.
+        residual_activation_s: when the residual starts acting; None = the task's
+            (5 s: the paper's simulated half-episode).
+        residual_period_s: residual policy period (10 Hz).
+        log_period_s: period of the episode logs.
+    """
+
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    dmp_period_s: float = 0.01
+    impedance: CartesianImpedanceConfig = field(default_factory=CartesianImpedanceConfig)
+    extrapolator: QuinticExtrapolatorConfig = field(default_factory=QuinticExtrapolatorConfig)
+    residual_mode: str = "full"
+    max_translation_m: float = 0.02
+    max_rotation_rad: float = 0.26
+    residual_activation_s: float | None = None
+    residual_period_s: float = 0.1
+    log_period_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("dmp_period_s", "residual_period_s", "log_period_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {value}")
+        if self.residual_mode not in ("full", "translation", "orientation", "off"):
+            raise ValueError(
+                "residual_mode must be one of full, translation, orientation, off; "
+                f"got {self.residual_mode!r}"
+            )
+
+
+@dataclass
+class RlfdDiagram:
+    """The built diagram and handles to its parts."""
+
+    diagram: Diagram
+    scene: Scene
+    task: TaskSpec
+    config: RlfdDiagramConfig
+    dmp: DmpSystem
+    extrapolator: QuinticExtrapolator
+    composer: ResidualComposer
+    controller: CartesianImpedanceController
+    observer: Observer
+    residual_policy: ResidualPolicy | None
+    logs: dict[str, VectorLogSink]
+    X_WGoal_nominal: RigidTransform
+
+
+def NominalGoal(task: TaskSpec) -> RigidTransform:
+    """X_WGoal as the demonstration saw it (no fixture error)."""
+    from rlfd_drake.scene import PoseSpecToRigidTransform
+
+    return PoseSpecToRigidTransform(task.X_WFixture) @ PoseSpecToRigidTransform(task.X_FP_goal)
+
+
+def BuildRlfdDiagram(
+    task: TaskSpec,
+    dmp_model: CartesianDmp,
+    config: RlfdDiagramConfig | None = None,
+    *,
+    policy: Callable[[np.ndarray], np.ndarray] | None = None,
+    fixture_error: RigidTransform | None = None,
+    meshcat: Meshcat | None = None,
+) -> RlfdDiagram:
+    """Builds the rLfD diagram of ``task``.
+
+    Args:
+        task: the task (scene, goal, success radius, episode timing).
+        dmp_model: the DMP fitted on the task's demonstration (the base policy).
+        config: rates and gains (default RlfdDiagramConfig()).
+        policy: a residual policy obs (26,) -> action (6,) in [-1, 1] run inside the
+            diagram at 10 Hz; None exports the input port ``residual`` instead.
+        fixture_error: X_err, calibration error of the fixture (None = none).
+        meshcat: if given, the scene and the hydroelastic contact surfaces are drawn.
+
+    Exported ports: input ``residual`` (6, only when ``policy`` is None); outputs
+    ``observation`` (26), ``reward`` (1), ``success`` (1), ``force_metrics`` (3),
+    ``distance_to_goal`` (1), ``X_WE_desired`` (7), ``X_WE_base`` (7), ``phase`` (1).
+    """
+    config = config if config is not None else RlfdDiagramConfig()
+    builder = DiagramBuilder()
+    scene = AddRlfdScene(builder, task, config.scene, fixture_error)
+    plant = scene.plant
+
+    part_inertia = scene.part_body.default_spatial_inertia()
+    # The controller knows its payload (as a real Franka is told its load): the part's
+    # mass and centre of mass, expressed in the hand frame H.
+    p_HPcm = scene.X_HP @ part_inertia.get_com()
+    control_plant = MakePandaControlModel(
+        X_HE=scene.X_HP,
+        payload_mass_kg=part_inertia.get_mass(),
+        payload_com_H=p_HPcm,
+    )
+    controller = builder.AddNamedSystem(
+        "impedance", CartesianImpedanceController(control_plant, config.impedance)
+    )
+    X_WGoal_nominal = NominalGoal(task)
+    dmp_system = builder.AddNamedSystem("dmp", DmpSystem(dmp_model, period_s=config.dmp_period_s))
+    extrapolator_config = replace(config.extrapolator, source_period_s=config.dmp_period_s)
+    extrapolator = builder.AddNamedSystem("extrapolator", QuinticExtrapolator(extrapolator_config))
+    activation = (
+        task.residual_activation_s
+        if config.residual_activation_s is None
+        else config.residual_activation_s
+    )
+    composer = builder.AddNamedSystem(
+        "composer",
+        ResidualComposer(
+            ResidualComposerConfig(
+                max_translation_m=config.max_translation_m,
+                max_rotation_rad=config.max_rotation_rad,
+                mode=config.residual_mode,
+                activation_time_s=activation,
+            )
+        ),
+    )
+    observer = builder.AddNamedSystem(
+        "observer",
+        Observer(
+            plant,
+            scene.part_body.index(),
+            RigidTransform(),
+            scene.X_WGoal,
+            X_WGoal_nominal,
+            scene.part_weld.index(),
+            scene.panda,
+            ObserverConfig(kappa_m=task.kappa_m, episode_time_s=task.episode_time_s),
+        ),
+    )
+
+    connect = builder.Connect
+    connect(dmp_system.GetOutputPort("X_WE_desired"), extrapolator.GetInputPort("X_WE_dmp"))
+    connect(dmp_system.GetOutputPort("V_WE_desired"), extrapolator.GetInputPort("V_WE_dmp"))
+    connect(extrapolator.GetOutputPort("X_WE_desired"), composer.GetInputPort("X_WE_base"))
+    connect(extrapolator.GetOutputPort("V_WE_desired"), composer.GetInputPort("V_WE_base"))
+    connect(composer.GetOutputPort("X_WE_desired"), controller.GetInputPort("X_WE_desired"))
+    connect(composer.GetOutputPort("V_WE_desired"), controller.GetInputPort("V_WE_desired"))
+    connect(plant.get_state_output_port(scene.panda), controller.GetInputPort("panda_state"))
+    connect(controller.GetOutputPort("panda_torque"), plant.get_actuation_input_port(scene.panda))
+    connect(plant.get_body_poses_output_port(), observer.GetInputPort("body_poses"))
+    connect(
+        plant.get_body_spatial_velocities_output_port(),
+        observer.GetInputPort("body_spatial_velocities"),
+    )
+    connect(plant.get_reaction_forces_output_port(), observer.GetInputPort("reaction_forces"))
+    connect(plant.get_contact_results_output_port(), observer.GetInputPort("contact_results"))
+    connect(
+        plant.get_generalized_contact_forces_output_port(scene.panda),
+        observer.GetInputPort("generalized_contact_forces"),
+    )
+    connect(dmp_system.GetOutputPort("phase"), observer.GetInputPort("phase"))
+
+    residual_policy = None
+    if policy is None:
+        # One exported input feeds both the composer and the observer.
+        residual_in = builder.AddNamedSystem("residual_input", PassThrough(RESIDUAL_SIZE))
+        builder.ExportInput(residual_in.get_input_port(), "residual")
+        residual_source = residual_in.get_output_port()
+    else:
+        residual_policy = builder.AddNamedSystem(
+            "residual_policy",
+            ResidualPolicy(
+                policy,
+                ResidualPolicyConfig(
+                    period_s=config.residual_period_s, observation_size=OBSERVATION_SIZE
+                ),
+            ),
+        )
+        connect(observer.GetOutputPort("observation"), residual_policy.GetInputPort("observation"))
+        residual_source = residual_policy.GetOutputPort("residual")
+    connect(residual_source, composer.GetInputPort("residual"))
+    connect(residual_source, observer.GetInputPort("residual"))
+
+    for name in ("observation", "reward", "success", "force_metrics", "distance_to_goal"):
+        builder.ExportOutput(observer.GetOutputPort(name), name)
+    builder.ExportOutput(composer.GetOutputPort("X_WE_desired"), "X_WE_desired")
+    builder.ExportOutput(extrapolator.GetOutputPort("X_WE_desired"), "X_WE_base")
+    builder.ExportOutput(dmp_system.GetOutputPort("phase"), "phase")
+
+    period = config.log_period_s
+    logs = {
+        "panda_state": LogVectorOutput(plant.get_state_output_port(scene.panda), builder, period),
+        "X_WE_desired": LogVectorOutput(composer.GetOutputPort("X_WE_desired"), builder, period),
+        "X_WE_base": LogVectorOutput(extrapolator.GetOutputPort("X_WE_desired"), builder, period),
+        "residual": LogVectorOutput(residual_source, builder, period),
+        "observation": LogVectorOutput(observer.GetOutputPort("observation"), builder, period),
+        "distance_to_goal": LogVectorOutput(
+            observer.GetOutputPort("distance_to_goal"), builder, period
+        ),
+        "force_metrics": LogVectorOutput(observer.GetOutputPort("force_metrics"), builder, period),
+    }
+    if meshcat is not None:
+        from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
+        from pydrake.visualization import AddDefaultVisualization
+
+        AddDefaultVisualization(builder, meshcat)
+        params = ContactVisualizerParams()
+        params.force_threshold = 0.5
+        ContactVisualizer.AddToBuilder(builder, plant, meshcat, params)
+
+    diagram = builder.Build()
+    diagram.set_name(f"rlfd_{task.name}")
+    return RlfdDiagram(
+        diagram=diagram,
+        scene=scene,
+        task=task,
+        config=config,
+        dmp=dmp_system,
+        extrapolator=extrapolator,
+        composer=composer,
+        controller=controller,
+        observer=observer,
+        residual_policy=residual_policy,
+        logs=logs,
+        X_WGoal_nominal=X_WGoal_nominal,
+    )
+
+
+def SetEpisodeStart(
+    rlfd: RlfdDiagram,
+    context: Context,
+    X_WP_start: RigidTransform,
+    q_seed: np.ndarray | None = None,
+) -> np.ndarray:
+    """Puts the arm at rest with the part at ``X_WP_start`` (by IK) and starts the DMP
+    there: the DMP generalises from the robot's actual start pose. Returns q (7,)."""
+    scene = rlfd.scene
+    q = SolvePandaIK(scene, X_WP_start, q_seed)
+    plant_context = scene.plant.GetMyMutableContextFromRoot(context)
+    scene.plant.SetPositions(plant_context, scene.panda, q)
+    scene.plant.SetVelocities(plant_context, scene.panda, np.zeros(7))
+    X_WP = scene.frame_P.CalcPoseInWorld(plant_context)
+    dmp_context = rlfd.dmp.GetMyMutableContextFromRoot(context)
+    rlfd.dmp.SetStartPose(dmp_context, X_WP.translation(), X_WP.rotation().ToQuaternion().wxyz())
+    return q
+
+
+def PoseFromOffset(X_WP_nominal: RigidTransform, dp: np.ndarray, dq_wxyz: np.ndarray):
+    """The nominal pose moved by a start offset: translation ``dp`` (3,) m in the world
+    and rotation ``dq`` (4,) wxyz applied in the world frame about the part origin."""
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RotationMatrix
+
+    R = RotationMatrix(Quaternion(np.asarray(dq_wxyz, float) / np.linalg.norm(dq_wxyz)))
+    return RigidTransform(R @ X_WP_nominal.rotation(), X_WP_nominal.translation() + dp)
+
+
+def MakeSimulator(rlfd: RlfdDiagram) -> Simulator:
+    """A simulator for the diagram (discrete systems only: no integrator tuning)."""
+    simulator = Simulator(rlfd.diagram)
+    return simulator

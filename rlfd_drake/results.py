@@ -1,0 +1,66 @@
+"""Writing measured results to ``results/`` with the command, seed and date that made them."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import platform
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def results_dir() -> Path:
+    """``results/`` in the current working directory (created if missing)."""
+    path = Path.cwd() / "results"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def invoked_command() -> str:
+    """The command line that started this process, as a user would retype it."""
+    argv = list(sys.argv)
+    if argv and argv[0].endswith(("/rlfd", "rlfd")):
+        argv[0] = "rlfd"
+    return shlex.join(argv)
+
+
+def _to_jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_result(
+    name: str, data: dict, seed: int | None = None, command: str | None = None
+) -> Path:
+    """Writes ``results/<name>.json`` = {"command", "seed", "date", "machine", "data"}.
+
+    The file is the record of a measurement: it is overwritten by a re-run of the same
+    command (that is the point of a reproducible result), never by anything else.
+    """
+    if not name or "/" in name or name.startswith("."):
+        raise ValueError(f"result name must be a plain file stem, got {name!r}")
+    record = {
+        "command": command if command is not None else invoked_command(),
+        "seed": seed,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "machine": {
+            "python": platform.python_version(),
+            "processor": platform.machine(),
+            "cores_used": 1,
+        },
+        "data": _to_jsonable(data),
+    }
+    path = results_dir() / f"{name}.json"
+    path.write_text(json.dumps(record, indent=2) + "\n")
+    return path

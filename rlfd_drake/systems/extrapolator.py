@@ -1,0 +1,190 @@
+"""Quintic extrapolation of the 100 Hz DMP set-points to the 500 Hz controller.
+
+At every tick of the source (``source_period_s``, 100 Hz) the extrapolator stores
+the source's pose and twist and fits, per coordinate, the Hermite polynomial
+through the last n <= 3 samples' values and first derivatives (degree 2n - 1: the
+quintic once three samples exist, which reproduces any quintic trajectory exactly;
+a cubic with two samples; linear extrapolation from the first sample alone).
+Between source ticks the output is that polynomial evaluated at the current time,
+i.e. extrapolated ahead of the newest sample by up to one source period.
+
+Orientation is fitted on the manifold: each sample's quaternion becomes the
+world-frame rotation vector ``r_j = Log(Q_j o conj(Q_ref))`` relative to the
+newest sample Q_ref, its rate ``dr/dt = J_l^-1(r_j) w_j`` (left Jacobian of SO(3)),
+the six rotation/position coordinates are fitted together, and the output is
+``Q(t) = Exp(r(t)) o Q_ref`` with ``w(t) = J_l(r(t)) dr/dt``: always a unit
+quaternion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis, Quaternion
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+
+from rlfd_drake.control_math import (
+    hermite_matrix,
+    so3_left_jacobian_apply,
+    so3_left_jacobian_inverse,
+)
+from rlfd_drake.geometry import quat_conjugate, quat_multiply, rotation_vector_from_quat
+
+_MAX_SAMPLES = 3
+_SAMPLE_SIZE = 13  # p (3), Q (4), w (3), v (3)
+# Discrete state layout.
+_N = 0  # number of valid samples
+_T_REF = 1  # time of the newest sample, s
+_HISTORY = slice(2, 2 + _MAX_SAMPLES * _SAMPLE_SIZE)  # oldest first
+_COEFFS = slice(_HISTORY.stop, _HISTORY.stop + 2 * _MAX_SAMPLES * 6)  # (6, 6) row-major
+_STATE_SIZE = _COEFFS.stop
+# The newest sample's quaternion, the reference of the rotation vectors.
+_Q_REF = slice(_HISTORY.stop - _SAMPLE_SIZE + 3, _HISTORY.stop - _SAMPLE_SIZE + 7)
+
+
+@dataclass(frozen=True)
+class QuinticExtrapolatorConfig:
+    """Attributes:
+    source_period_s: period of the source (the DMP, 100 Hz), s; samples are taken at
+        multiples of it.
+    """
+
+    source_period_s: float = 0.01
+
+
+class QuinticExtrapolator(LeafSystem):
+    """Up-samples a pose/twist set-point stream with a Hermite quintic.
+
+    .. pydrake_system::
+
+        name: QuinticExtrapolator
+        input_ports:
+        - X_WE_dmp
+        - V_WE_dmp
+        output_ports:
+        - X_WE_desired
+        - V_WE_desired
+
+    * ``X_WE_dmp`` (7): source pose, position (m) then quaternion [w, x, y, z].
+    * ``V_WE_dmp`` (6): source spatial velocity [w (rad/s); v (m/s)], world.
+    * ``X_WE_desired`` (7), ``V_WE_desired`` (6): the polynomial at the current time.
+
+    The discrete state (history and coefficients) is updated at the source rate;
+    the outputs are evaluated from it at whatever time a consumer samples them (the
+    500 Hz controller), so they are exact at any rate and cost one small polynomial
+    evaluation per read. Before the first sample the outputs are the identity pose
+    and zero twist. A sample taken twice at the same time (initialisation followed
+    by the periodic event at t = 0) replaces the newest one.
+    """
+
+    def __init__(
+        self,
+        config: QuinticExtrapolatorConfig = QuinticExtrapolatorConfig(),  # noqa: B008
+    ):
+        super().__init__()
+        if config.source_period_s <= 0.0:
+            raise ValueError(f"source_period_s must be > 0, got {config.source_period_s}")
+        self.config = config
+        h = config.source_period_s
+        self._h = h
+        # Inverse Hermite matrices for 1, 2, 3 samples at scaled times -(n-1), ..., 0.
+        self._A_inv = {
+            n: np.linalg.inv(hermite_matrix(np.arange(-(n - 1), 1, dtype=float)))
+            for n in range(1, _MAX_SAMPLES + 1)
+        }
+        # Powers of the value and derivative rows of the basis, evaluated together:
+        # B(s) = ([s^k], [k s^(k-1)]) = factor * s ** exponent, reshaped (2, 6).
+        k = np.arange(2 * _MAX_SAMPLES, dtype=float)
+        self._exponent = np.concatenate([k, np.maximum(k - 1.0, 0.0)])
+        self._factor = np.concatenate([np.ones_like(k), k / h])
+        self._X_port = self.DeclareVectorInputPort("X_WE_dmp", 7)
+        self._V_port = self.DeclareVectorInputPort("V_WE_dmp", 6)
+        self.DeclareDiscreteState(_STATE_SIZE)
+        self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0, self._update)
+        self.DeclareInitializationDiscreteUpdateEvent(self._update)
+        self.DeclareVectorOutputPort(
+            "X_WE_desired",
+            7,
+            self._calc_X,
+            prerequisites_of_calc={self.all_state_ticket(), self.time_ticket()},
+        )
+        self.DeclareVectorOutputPort(
+            "V_WE_desired",
+            6,
+            self._calc_V,
+            prerequisites_of_calc={self.all_state_ticket(), self.time_ticket()},
+        )
+
+    # -- update at the source rate ------------------------------------------------
+    def _update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        x = context.get_discrete_state(0).get_value()
+        t = context.get_time()
+        n = int(x[_N])
+        history = x[_HISTORY].reshape(_MAX_SAMPLES, _SAMPLE_SIZE).copy()
+        X = self._X_port.Eval(context)
+        V = self._V_port.Eval(context)
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(V))):
+            raise RuntimeError(f"QuinticExtrapolator: non-finite input X={X}, V={V}")
+        sample = np.concatenate([X[:3], X[3:] / np.linalg.norm(X[3:]), V])
+        if n > 0 and t - x[_T_REF] < 0.5 * self._h:
+            history[-1] = sample  # same tick again: replace
+        else:
+            history[:-1] = history[1:]
+            history[-1] = sample
+            n = min(n + 1, _MAX_SAMPLES)
+        new = np.zeros(_STATE_SIZE)
+        new[_N] = n
+        new[_T_REF] = t
+        new[_HISTORY] = history.reshape(-1)
+        new[_COEFFS] = self._fit(history[_MAX_SAMPLES - n :]).reshape(-1)
+        discrete_state.set_value(0, new)
+
+    def _fit(self, samples: np.ndarray) -> np.ndarray:
+        """(6, 6) coefficients (rows: powers of scaled time, columns: [p, r])."""
+        n = samples.shape[0]
+        Q_ref = samples[-1, 3:7]
+        r = rotation_vector_from_quat(quat_multiply(samples[:, 3:7], quat_conjugate(Q_ref)))
+        values = np.hstack([samples[:, :3], r])
+        rates = np.empty((n, 6))
+        rates[:, :3] = samples[:, 10:13]
+        for j in range(n):
+            rates[j, 3:] = so3_left_jacobian_inverse(r[j]) @ samples[j, 7:10]
+        C = np.zeros((2 * _MAX_SAMPLES, 6))
+        C[: 2 * n] = self._A_inv[n] @ np.vstack([values, self._h * rates])
+        return C
+
+    # -- outputs --------------------------------------------------------------------
+    def _evaluate(self, x: np.ndarray, t: float) -> np.ndarray:
+        """(2, 6): [value; rate per second] of [p, r] at time t from the state x."""
+        s = (t - x[_T_REF]) / self._h
+        basis = (self._factor * s**self._exponent).reshape(2, 2 * _MAX_SAMPLES)
+        return basis @ x[_COEFFS].reshape(2 * _MAX_SAMPLES, 6)
+
+    def _calc_X(self, context: Context, output: BasicVector) -> None:
+        x = context.get_discrete_state(0).get_value()
+        if x[_N] == 0:
+            output.SetFromVector(np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]))
+            return
+        value = self._evaluate(x, context.get_time())[0]
+        Q_ref = x[_Q_REF]
+        r = value[3:]
+        angle = float(np.sqrt(r @ r))
+        if angle == 0.0:
+            Q = Q_ref
+        else:
+            dQ = AngleAxis(angle, r / angle).quaternion()
+            Q = dQ.multiply(Quaternion(Q_ref)).wxyz()
+        out = output.get_mutable_value()
+        out[:3] = value[:3]
+        out[3:] = Q
+
+    def _calc_V(self, context: Context, output: BasicVector) -> None:
+        x = context.get_discrete_state(0).get_value()
+        if x[_N] == 0:
+            output.SetFromVector(np.zeros(6))
+            return
+        value, rate = self._evaluate(x, context.get_time())
+        out = output.get_mutable_value()
+        out[:3] = so3_left_jacobian_apply(value[3:], rate[3:])
+        out[3:] = rate[:3]

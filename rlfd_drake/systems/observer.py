@@ -1,0 +1,222 @@
+"""Observation, sparse reward, success and contact-force metrics of an episode."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.common.value import Value
+from pydrake.math import RigidTransform
+from pydrake.multibody.math import SpatialForce, SpatialVelocity
+from pydrake.multibody.plant import ContactResults, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, JointIndex, ModelInstanceIndex
+from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
+
+#: Size of the observation vector (see :class:`Observer`).
+OBSERVATION_SIZE = 26
+# Force-metric state layout.
+_PEAK_F, _SUM_F, _COUNT, _PEAK_TAU, _SUCCESS = range(5)
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """Attributes:
+    kappa_m: success radius of the sparse reward, m.
+    force_metrics_period_s: update period of the force metrics and success latch, s.
+    episode_time_s: episode length used to normalise time, s.
+    position_scale_m: position error per unit of observation, m.
+    angular_velocity_scale_rad_per_s, linear_velocity_scale_m_per_s: twist scales.
+    torque_scale_Nm, force_scale_N: wrist wrench scales.
+    """
+
+    kappa_m: float = 0.005
+    force_metrics_period_s: float = 0.002
+    episode_time_s: float = 10.0
+    position_scale_m: float = 0.02
+    angular_velocity_scale_rad_per_s: float = 1.0
+    linear_velocity_scale_m_per_s: float = 0.1
+    torque_scale_Nm: float = 5.0
+    force_scale_N: float = 50.0
+
+
+class Observer(LeafSystem):
+    """Turns plant outputs into the RL observation, reward and metrics.
+
+    .. pydrake_system::
+
+        name: Observer
+        input_ports:
+        - body_poses
+        - body_spatial_velocities
+        - reaction_forces
+        - contact_results
+        - generalized_contact_forces
+        - phase
+        - residual
+        output_ports:
+        - observation
+        - reward
+        - success
+        - force_metrics
+        - distance_to_goal
+
+    Inputs: the plant's ``get_body_poses_output_port``,
+    ``get_body_spatial_velocities_output_port``, ``get_reaction_forces_output_port``,
+    ``get_contact_results_output_port``, ``get_generalized_contact_forces_output_port(arm)``
+    (n_v of the arm), the DMP phase (1) and the residual action (6).
+
+    ``observation`` (26), P being the part frame (X_WP = X_WB X_BP):
+
+    ====== ====================================================================
+    0:3    (p_WP - p_WGoal_nominal) / position_scale_m (the nominal goal is the
+           demonstration's: the robot does not know the fixture error)
+    3:6    rotation vector of Q_WP o conj(Q_WGoal_nominal), rad, world
+    6:9    angular velocity of P / angular_velocity_scale_rad_per_s, world
+    9:12   linear velocity of P / linear_velocity_scale_m_per_s, world
+    12:15  wrist torque / torque_scale_Nm: reaction at the weld joint on its child,
+           about the joint's child frame origin, expressed in world
+    15:18  wrist force / force_scale_N, same convention
+    18     DMP phase (1 -> 0)
+    19     time / episode_time_s
+    20:26  the residual action input (last held action)
+    ====== ====================================================================
+
+    ``reward`` (1): sparse ``1[|p_WP - p_WGoal_true| <= kappa_m]``.
+    ``success`` (1): 1 once the reward has been 1 at a force-metric update (latched).
+    ``force_metrics`` (3): [peak contact force (N), time-averaged contact force (N),
+    peak |generalised contact torque| over the arm joints (N m)] since
+    initialisation; the contact force at an instant is the sum over contact
+    surfaces/points of |F| (magnitudes, so opposing wall forces do not cancel).
+    ``distance_to_goal`` (1): |p_WP - p_WGoal_true|, m.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        part_body_index: BodyIndex,
+        X_BP: RigidTransform,
+        X_WGoal_true: RigidTransform,
+        X_WGoal_nominal: RigidTransform,
+        wrist_joint_index: JointIndex,
+        arm_instance: ModelInstanceIndex,
+        config: ObserverConfig = ObserverConfig(),  # noqa: B008
+    ):
+        super().__init__()
+        self.config = config
+        self._body = int(part_body_index)
+        self._X_BP = X_BP
+        self._p_BP = X_BP.translation().copy()
+        self._p_goal_true = X_WGoal_true.translation().copy()
+        self._p_goal_nominal = X_WGoal_nominal.translation().copy()
+        self._R_goal_nominal_inv = X_WGoal_nominal.rotation().inverse()
+        joint = plant.get_joint(wrist_joint_index)
+        self._joint = int(wrist_joint_index)
+        self._joint_child_body = int(joint.child_body().index())
+        self._X_CJc = joint.frame_on_child().GetFixedPoseInBodyFrame()
+        self._obs_scale = np.concatenate(
+            [
+                np.full(3, 1.0 / config.position_scale_m),
+                np.ones(3),
+                np.full(3, 1.0 / config.angular_velocity_scale_rad_per_s),
+                np.full(3, 1.0 / config.linear_velocity_scale_m_per_s),
+                np.full(3, 1.0 / config.torque_scale_Nm),
+                np.full(3, 1.0 / config.force_scale_N),
+            ]
+        )
+        n_arm = plant.num_velocities(arm_instance)
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", Value([RigidTransform()] * plant.num_bodies())
+        )
+        self._velocities = self.DeclareAbstractInputPort(
+            "body_spatial_velocities", Value([SpatialVelocity()] * plant.num_bodies())
+        )
+        self._reactions = self.DeclareAbstractInputPort(
+            "reaction_forces", Value([SpatialForce()] * plant.num_joints())
+        )
+        self._contacts = self.DeclareAbstractInputPort("contact_results", Value(ContactResults()))
+        self._tau_contact = self.DeclareVectorInputPort("generalized_contact_forces", n_arm)
+        self._phase = self.DeclareVectorInputPort("phase", 1)
+        self._residual = self.DeclareVectorInputPort("residual", 6)
+        self.DeclareDiscreteState(5)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            config.force_metrics_period_s, 0.0, self._update_metrics
+        )
+        self.DeclareVectorOutputPort("observation", OBSERVATION_SIZE, self._calc_observation)
+        self.DeclareVectorOutputPort("reward", 1, self._calc_reward)
+        self.DeclareVectorOutputPort(
+            "success", 1, self._calc_success, prerequisites_of_calc={self.all_state_ticket()}
+        )
+        self.DeclareVectorOutputPort(
+            "force_metrics", 3, self._calc_force_metrics, {self.all_state_ticket()}
+        )
+        self.DeclareVectorOutputPort("distance_to_goal", 1, self._calc_distance)
+
+    # -- helpers ------------------------------------------------------------------
+    def _X_WP(self, context: Context) -> RigidTransform:
+        return self._poses.Eval(context)[self._body] @ self._X_BP
+
+    def DistanceToGoal(self, context: Context) -> float:
+        """|p_WP - p_WGoal_true| (m)."""
+        return float(np.linalg.norm(self._X_WP(context).translation() - self._p_goal_true))
+
+    @staticmethod
+    def TotalContactForce(contact_results: ContactResults) -> float:
+        """Sum of the contact force magnitudes (N) of all surfaces and points."""
+        total = 0.0
+        for i in range(contact_results.num_hydroelastic_contacts()):
+            f = contact_results.hydroelastic_contact_info(i).F_Ac_W().translational()
+            total += float(np.sqrt(f @ f))
+        for i in range(contact_results.num_point_pair_contacts()):
+            f = contact_results.point_pair_contact_info(i).contact_force()
+            total += float(np.sqrt(f @ f))
+        return total
+
+    # -- discrete update ------------------------------------------------------------
+    def _update_metrics(self, context: Context, discrete_state: DiscreteValues) -> None:
+        x = context.get_discrete_state(0).get_value()
+        force = self.TotalContactForce(self._contacts.Eval(context))
+        tau = float(np.max(np.abs(self._tau_contact.Eval(context))))
+        reached = self.DistanceToGoal(context) <= self.config.kappa_m
+        new = discrete_state.get_mutable_value(0)
+        new[_PEAK_F] = max(x[_PEAK_F], force)
+        new[_SUM_F] = x[_SUM_F] + force
+        new[_COUNT] = x[_COUNT] + 1.0
+        new[_PEAK_TAU] = max(x[_PEAK_TAU], tau)
+        new[_SUCCESS] = 1.0 if (reached or x[_SUCCESS] > 0.5) else 0.0
+
+    # -- outputs --------------------------------------------------------------------
+    def _calc_observation(self, context: Context, output: BasicVector) -> None:
+        X_WB = self._poses.Eval(context)[self._body]
+        X_WP = X_WB @ self._X_BP
+        V_WB = self._velocities.Eval(context)[self._body]
+        V_WP = V_WB.Shift(X_WB.rotation() @ self._p_BP)
+        F_CJc_Jc = self._reactions.Eval(context)[self._joint]
+        R_WJc = (
+            self._poses.Eval(context)[self._joint_child_body].rotation() @ self._X_CJc.rotation()
+        )
+        aa = AngleAxis((X_WP.rotation() @ self._R_goal_nominal_inv).ToQuaternion())
+        obs = output.get_mutable_value()
+        raw = np.empty(18)
+        raw[0:3] = X_WP.translation() - self._p_goal_nominal
+        raw[3:6] = aa.angle() * aa.axis()
+        raw[6:12] = V_WP.get_coeffs()
+        raw[12:18] = F_CJc_Jc.Rotate(R_WJc).get_coeffs()
+        obs[:18] = raw * self._obs_scale
+        obs[18] = self._phase.Eval(context)[0]
+        obs[19] = context.get_time() / self.config.episode_time_s
+        obs[20:26] = self._residual.Eval(context)
+
+    def _calc_reward(self, context: Context, output: BasicVector) -> None:
+        output.SetAtIndex(0, 1.0 if self.DistanceToGoal(context) <= self.config.kappa_m else 0.0)
+
+    def _calc_success(self, context: Context, output: BasicVector) -> None:
+        output.SetAtIndex(0, context.get_discrete_state(0).get_value()[_SUCCESS])
+
+    def _calc_force_metrics(self, context: Context, output: BasicVector) -> None:
+        x = context.get_discrete_state(0).get_value()
+        mean = x[_SUM_F] / x[_COUNT] if x[_COUNT] > 0 else 0.0
+        output.SetFromVector([x[_PEAK_F], mean, x[_PEAK_TAU]])
+
+    def _calc_distance(self, context: Context, output: BasicVector) -> None:
+        output.SetAtIndex(0, self.DistanceToGoal(context))

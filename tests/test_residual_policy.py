@@ -1,0 +1,79 @@
+"""ResidualPolicy with a plain callable and a torch module."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+
+from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
+
+N_OBS = 4
+
+
+class CountingPolicy:
+    """Action = 0.1 * (number of calls since reset) in every entry; records resets."""
+
+    def __init__(self):
+        self.calls = 0
+        self.resets = 0
+
+    def reset(self):
+        self.calls = 0
+        self.resets += 1
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        assert obs.dtype == np.float32
+        self.calls += 1
+        return np.full(6, 0.1 * self.calls)
+
+
+def _simulate(policy, duration: float, obs: np.ndarray | None = None):
+    obs = np.arange(N_OBS, dtype=float) if obs is None else obs
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(obs))
+    system = builder.AddSystem(ResidualPolicy(policy, ResidualPolicyConfig(0.1, N_OBS)))
+    builder.Connect(source.get_output_port(), system.GetInputPort("observation"))
+    log = builder.AddSystem(VectorLogSink(6, 0.05))
+    builder.Connect(system.GetOutputPort("residual"), log.get_input_port())
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(duration)
+    data = log.FindLog(simulator.get_context())
+    return simulator, data.sample_times(), data.data().T
+
+
+def test_callable_held_at_10_hz_and_reset_at_initialisation():
+    policy = CountingPolicy()
+    simulator, times, actions = _simulate(policy, 0.35)
+    assert policy.resets == 1
+    # Initialisation + updates at 0, 0.1, 0.2, 0.3 -> 5 calls; held in between.
+    assert policy.calls == 5
+    np.testing.assert_allclose(actions[np.isclose(times, 0.15)][0], 0.3)  # init, t=0, t=0.1
+    # Actions beyond 1 are clipped.
+    simulator.Initialize()
+    assert policy.resets == 2
+    simulator.AdvanceTo(1.5)
+    assert np.all(simulator.get_context().get_discrete_state(0).get_value() == 1.0)
+
+
+def test_torch_module_policy():
+    torch.manual_seed(0)
+    module = torch.nn.Sequential(
+        torch.nn.Linear(N_OBS, 16), torch.nn.Tanh(), torch.nn.Linear(16, 6), torch.nn.Tanh()
+    )
+    obs = np.array([0.1, -0.2, 0.3, 0.4])
+    _, _, actions = _simulate(module, 0.2, obs)
+    expected = module(torch.tensor(obs, dtype=torch.float32)).detach().numpy()
+    np.testing.assert_allclose(actions[-1], expected, atol=1e-6)
+
+
+def test_bad_action_raises():
+    with pytest.raises(RuntimeError, match="need 6 finite"):
+        _simulate(lambda obs: np.zeros(5), 0.1)
+    with pytest.raises(RuntimeError, match="need 6 finite"):
+        _simulate(lambda obs: np.full(6, np.nan), 0.1)
+    with pytest.raises(TypeError, match="callable"):
+        ResidualPolicy(42)

@@ -1,0 +1,188 @@
+"""Task specs: loading, strict validation, perturbation distributions."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rlfd_drake.tasks import (
+    describe_task,
+    evaluation_grid,
+    evaluation_size,
+    list_tasks,
+    load_task,
+    sample_fixture_error,
+    sample_start_offset,
+    tasks_dir,
+)
+
+TASKS = ["gear", "peg", "peg_easy", "peg_hard", "rj45"]
+
+
+def _angle_deg(q: np.ndarray) -> float:
+    return math.degrees(2.0 * math.acos(min(1.0, abs(float(q[0])))))
+
+
+def _write_variant(tmp_path: Path, edit) -> Path:
+    data = yaml.safe_load((tasks_dir() / "peg.yaml").read_text())
+    edit(data)
+    path = tmp_path / "variant.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_list_and_load_all():
+    assert list_tasks() == TASKS
+    for name in TASKS:
+        task = load_task(name, check_demo=False)
+        assert task.name == name
+        assert task.X_FP_goal.position_m == (0.0, 0.0, -task.fixture.depth_m)
+        json.dumps(describe_task(task))
+    assert load_task("peg", check_demo=False).opening_size_m() == pytest.approx((0.0284, 0.0284))
+    assert load_task("gear", check_demo=False).opening_size_m() == pytest.approx((0.0228, 0.0228))
+
+
+def test_paper_numbers():
+    peg = load_task("peg", check_demo=False)
+    assert peg.part.size_m == (0.028, 0.028, 0.077)
+    assert peg.fixture.clearance_m == pytest.approx(0.0004)
+    gear = load_task("gear", check_demo=False)
+    assert gear.part.size_m == (0.0792, 0.07985, 0.01079)
+    assert gear.part.hole_size_m == (0.023, 0.023)
+    for name in ("peg", "gear", "rj45"):
+        assert load_task(name, check_demo=False).fixture_error.table_slope_deg == 1.0
+    for name in ("peg_easy", "peg_hard"):
+        task = load_task(name, check_demo=False)
+        assert task.fixture_error.table_slope_deg == 0.0
+        assert task.start.half_extent_m == 0.12
+    assert load_task("rj45", check_demo=False).force_limit_n is not None
+    hard, easy = load_task("peg_hard", check_demo=False), load_task("peg_easy", check_demo=False)
+    assert hard.fixture.clearance_m < easy.fixture.clearance_m
+
+
+def test_unknown_field(tmp_path):
+    path = _write_variant(tmp_path, lambda d: d["part"].update(colour="red"))
+    with pytest.raises(ValueError, match=r"unknown field part\.colour"):
+        load_task(path, check_demo=False)
+    path = _write_variant(tmp_path, lambda d: d.update(speed=1.0))
+    with pytest.raises(ValueError, match=r"unknown field speed"):
+        load_task(path, check_demo=False)
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "pattern"),
+    [
+        (
+            "part",
+            "size_m",
+            [-0.028, 0.028, 0.077],
+            r"part\.size_m\[0\] must be positive, got -0\.028",
+        ),
+        ("part", "mass_kg", 0.0, r"part\.mass_kg must be positive, got 0\.0"),
+        ("fixture", "depth_m", -0.01, r"fixture\.depth_m must be positive, got -0\.01"),
+        ("fixture", "clearance_m", -1e-4, r"fixture\.clearance_m must be non-negative"),
+        ("fixture", "kind", "square_shaft", r"fixture\.kind 'square_shaft' does not fit"),
+        ("part", "size_m", [0.028, 0.028], r"part\.size_m: expected 3 values"),
+        ("part", "mass_kg", "heavy", r"part\.mass_kg: expected a number, got 'heavy'"),
+    ],
+)
+def test_bad_values(tmp_path, section, key, value, pattern):
+    path = _write_variant(tmp_path, lambda d: d[section].update({key: value}))
+    with pytest.raises(ValueError, match=pattern):
+        load_task(path, check_demo=False)
+
+
+def test_missing_field_and_unknown_task(tmp_path):
+    path = _write_variant(tmp_path, lambda d: d.pop("kappa_m"))
+    with pytest.raises(ValueError, match="missing field kappa_m"):
+        load_task(path, check_demo=False)
+    with pytest.raises(ValueError, match="unknown task 'nope'"):
+        load_task("nope")
+
+
+def test_missing_demo_file(tmp_path):
+    path = _write_variant(tmp_path, lambda d: d.update(demo="demos/does_not_exist.csv"))
+    with pytest.raises(ValueError, match=r"demo: demonstration file .*does_not_exist\.csv"):
+        load_task(path)
+    assert load_task(path, check_demo=False).demo == "demos/does_not_exist.csv"
+
+
+def test_yaml11_exponent_string_accepted(tmp_path):
+    path = _write_variant(tmp_path, lambda d: d["part"].update(hydroelastic_modulus_pa="1.0e7"))
+    assert load_task(path, check_demo=False).part.hydroelastic_modulus_pa == 1.0e7
+
+
+def test_uniform_box_grid():
+    task = load_task("peg_easy", check_demo=False)
+    grid = evaluation_grid(task, seed=3)
+    assert len(grid) == 500 == evaluation_size(task)
+    dps = np.array([g[0] for g in grid])
+    assert np.all(np.abs(dps) <= 0.12) and np.max(np.abs(dps)) > 0.11
+    assert all(np.array_equal(g[1], [1, 0, 0, 0]) and g[2] == 0 for g in grid)
+
+
+def test_six_boxes_grid():
+    task = load_task("peg", check_demo=False)
+    grid = evaluation_grid(task, seed=0)
+    assert len(grid) == 500
+    bins = np.array([g[2] for g in grid])
+    assert np.bincount(bins).tolist() == [84, 84, 83, 83, 83, 83]
+    s = task.start
+    for dp, _, k in grid:
+        d = s.box_distances_m[k]
+        assert np.all(np.abs(np.abs(dp) - d) <= s.box_half_extent_m + 1e-12)
+    # Deterministic per seed, different across seeds.
+    again = evaluation_grid(task, seed=0)
+    assert all(np.array_equal(a[0], b[0]) for a, b in zip(grid, again, strict=True))
+    other = evaluation_grid(task, seed=1)
+    assert not np.array_equal(grid[0][0], other[0][0])
+
+
+@pytest.mark.parametrize("name", ["gear", "rj45"])
+def test_orientation_bins_grid(name):
+    task = load_task(name, check_demo=False)
+    grid = evaluation_grid(task, seed=0)
+    assert len(grid) == 160
+    assert np.bincount([g[2] for g in grid]).tolist() == [20] * 8
+    for dp, dq, b in grid:
+        assert np.linalg.norm(dq) == pytest.approx(1.0)
+        assert 5.0 * b - 1e-9 <= _angle_deg(dq) <= 5.0 * (b + 1) + 1e-9
+        assert np.all(np.abs(dp) <= 0.01)
+    axes = np.array([g[1][1:] / np.linalg.norm(g[1][1:]) for g in grid])
+    assert np.linalg.norm(axes.mean(axis=0)) < 0.2  # axes spread over the sphere
+
+
+def test_sample_start_offset_bounds():
+    rng = np.random.default_rng(0)
+    for name in TASKS:
+        task = load_task(name, check_demo=False)
+        for _ in range(50):
+            dp, dq = sample_start_offset(task, rng)
+            assert dp.shape == (3,) and dq.shape == (4,)
+            assert np.linalg.norm(dq) == pytest.approx(1.0)
+            assert np.all(np.abs(dp) <= 0.12)
+            assert _angle_deg(dq) <= 40.0 + 1e-9
+
+
+def test_fixture_error():
+    rng = np.random.default_rng(0)
+    easy = load_task("peg_easy", check_demo=False)
+    for _ in range(50):
+        dp, dq = sample_fixture_error(easy, rng)
+        assert np.all(np.abs(dp) <= np.array(easy.fixture_error.position_bound_m) + 1e-12)
+        assert _angle_deg(dq) <= 1.0 + 1e-9
+    peg = load_task("peg", check_demo=False)
+    slope_only = dataclasses.replace(
+        peg, fixture_error=dataclasses.replace(peg.fixture_error, rotation_bound_deg=0.0)
+    )
+    _, dq = sample_fixture_error(slope_only, rng)
+    assert _angle_deg(dq) == pytest.approx(1.0)
+    assert dq[1:] / np.linalg.norm(dq[1:]) == pytest.approx([0.0, 1.0, 0.0])
+    angles = [_angle_deg(sample_fixture_error(peg, rng)[1]) for _ in range(100)]
+    assert max(angles) <= 2.0 + 1e-9 and min(angles) >= 0.0
