@@ -48,7 +48,8 @@ class ExpertConfig:
         start_offset_G_m: demo start relative to the goal, m.
         start_rotation_deg: demo start orientation relative to the goal: rotation
             vector in degrees (world axes).
-        pre_insert_height_m: height of the pre-insertion pose above the goal, m.
+        pre_insert_height_m: height of the pre-insertion pose above the fixture
+            entrance, m.
         push_depth_m: how far below the goal the expert aims at the end, m.
         approach_s, pause_s, insert_s, hold_s: durations of the phases, s.
         variation_m: std of the via-point variation, m.
@@ -79,9 +80,14 @@ def minimum_jerk(s: np.ndarray) -> np.ndarray:
 
 
 def expert_path(
-    X_WGoal: RigidTransform, config: ExpertConfig, rng: np.random.Generator, dt: float = 0.001
+    X_WGoal: RigidTransform,
+    insertion_depth_m: float,
+    config: ExpertConfig,
+    rng: np.random.Generator,
+    dt: float = 0.001,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The expert's commanded path of P, sampled every ``dt``.
+    """The expert's commanded path of P, sampled every ``dt``; ``insertion_depth_m`` is
+    the goal's depth below the fixture entrance.
 
     Returns: times (N,) s, positions (N, 3) m, quaternions (N, 4) wxyz, spatial
     velocities (N, 6) [w; v] (world).
@@ -95,7 +101,8 @@ def expert_path(
     q_start = quat_multiply(
         quat_from_rotation_vector(np.radians(config.start_rotation_deg)), q_goal
     )
-    p_pre = p_goal + config.pre_insert_height_m * z_G + 0.3 * jitter * np.array([1, 1, 0])
+    # The expert sees the hole: it lines up exactly above it before inserting.
+    p_pre = p_goal + (insertion_depth_m + config.pre_insert_height_m) * z_G
     p_end = p_goal - config.push_depth_m * z_G
     # A human arcs over rather than moving in a straight line: lift the midpoint.
     arc = 0.04 * z_G + config.variation_m * rng.standard_normal(3)
@@ -143,7 +150,7 @@ def record_demonstration(
     config = config if config is not None else ExpertConfig()
     rng = np.random.default_rng(seed)
     X_WGoal = NominalGoal(task)
-    times, positions, quats, twists = expert_path(X_WGoal, config, rng)
+    times, positions, quats, twists = expert_path(X_WGoal, task.fixture.depth_m, config, rng)
 
     builder = DiagramBuilder()
     scene = AddRlfdScene(builder, task, SceneConfig())
@@ -191,6 +198,12 @@ def record_demonstration(
         out_q[k] = X_WP.rotation().ToQuaternion().wxyz()
     demo = Demonstration(sample_times - sample_times[0], out_p, out_q)
     demo.validate()
+    miss = float(np.linalg.norm(out_p[-1] - X_WGoal.translation()))
+    if miss > task.kappa_m:
+        raise RuntimeError(
+            f"the scripted expert did not insert the part on {task.name!r} "
+            f"(final distance {miss:.4f} m > kappa {task.kappa_m} m); try another seed"
+        )
     return demo
 
 
