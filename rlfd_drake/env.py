@@ -1,0 +1,367 @@
+"""The rLfD insertion tasks as Gymnasium environments, on ``pydrake.gym.DrakeGymEnv``.
+
+``DrakeGymEnv`` (Drake 1.51) has defects that this subclass fixes, each covered by a
+test in ``tests/test_env.py``:
+
+* a user ``info_handler`` is silently dropped (``if info_handler is
+  callable(info_handler)`` is always False for a function): we keep it;
+* ``reset(options=...)`` is refused by an assertion: we accept the options below;
+* ``render_mode="ansi"`` is declared as ``"ascii"`` in ``metadata``: we declare and
+  implement ``"ansi"``;
+* ``reset()`` runs ``Simulator.Initialize()`` *before* the reset handler sets the
+  state, so initialisation events see the default state: we set the state first;
+* a solver failure in ``step()`` returns an empty ``info``: we say why in it.
+
+All the environments are registered here, in one place (see ``ENV_IDS``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from pydrake.gym import DrakeGymEnv
+from pydrake.systems.analysis import Simulator
+
+from rlfd_drake.demonstration import load_demonstration
+from rlfd_drake.diagram import (
+    RESIDUAL_SIZE,
+    BuildRlfdDiagram,
+    NominalGoal,
+    PoseFromOffset,
+    RlfdDiagram,
+    RlfdDiagramConfig,
+    SetEpisodeStart,
+)
+from rlfd_drake.dmp import fit_cartesian_dmp
+from rlfd_drake.scene import FixtureErrorTransform
+from rlfd_drake.systems.observer import OBSERVATION_SIZE
+from rlfd_drake.tasks import TaskSpec, load_task, sample_fixture_error, sample_start_offset
+
+#: Gymnasium ids -> task names. Registered by :func:`register_envs`.
+ENV_IDS: dict[str, str] = {
+    "rlfd/PegInsertion-v0": "peg_easy",
+    "rlfd/PegInsertionHard-v0": "peg_hard",
+    "rlfd/Peg28mm-v0": "peg",
+    "rlfd/GearInsertion-v0": "gear",
+    "rlfd/RJ45Insertion-v0": "rj45",
+}
+
+#: Keys ``reset(options=...)`` accepts.
+RESET_OPTIONS = ("start_dp", "start_dq", "fixture_dp", "fixture_dq", "perturbation_scale")
+
+# The pure-RL baseline's dense reward (paper Sec. V-C): alpha, beta, eps.
+DENSE_ALPHA, DENSE_BETA, DENSE_EPS = 10.0, 0.002, 1e-4
+
+
+@dataclass(frozen=True)
+class EpisodeSetup:
+    """What ``reset`` sampled: start offset (dp (3,) m, dq (4,) wxyz, world) from the
+    demonstration's start, and fixture calibration error (dp (3,) m, dq (4,) wxyz)."""
+
+    start_dp: np.ndarray
+    start_dq: np.ndarray
+    fixture_dp: np.ndarray
+    fixture_dq: np.ndarray
+
+
+def _vector_option(options: dict, key: str, size: int, default: np.ndarray) -> np.ndarray:
+    if key not in options:
+        return default
+    value = np.asarray(options[key], dtype=float)
+    if value.shape != (size,) or not np.all(np.isfinite(value)):
+        raise ValueError(f"reset option {key} must be {size} finite numbers, got {options[key]!r}")
+    if size == 4:
+        norm = np.linalg.norm(value)
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"reset option {key} must be a unit quaternion, got norm {norm}")
+    return value
+
+
+class RlfdEnv(DrakeGymEnv):
+    """Residual Learning from Demonstration on one insertion task.
+
+    A DMP fitted on the task's single demonstration drives a simulated Franka Panda
+    (Cartesian impedance control at 500 Hz, hydroelastic contact) towards the
+    demonstrated goal. The agent outputs a residual that corrects the DMP's set-point in
+    task space, at 10 Hz, in the second half of each episode.
+
+    ## Action Space
+    ``Box(-1, 1, (6,), float32)``: the residual ``[dp (3), r (3)]``. ``dp`` is scaled to
+    ``max_translation_m`` (2 cm) and added to the DMP position; ``r`` is an angle-axis
+    vector scaled to ``max_rotation_rad`` (15 deg), ``Q_delta = [cos(a/2), r/|r|
+    sin(a/2)]`` composed as ``Q_f = Q_delta o Q_b``. ``residual_mode`` may restrict it to
+    translation or orientation. The action is held for one step (0.1 s).
+
+    ## Observation Space
+    ``Box(-inf, inf, (26,), float32)`` (see ``systems/observer.py``): part position
+    relative to the *demonstrated* goal (/2 cm), orientation error (rad), twist,
+    wrist force/torque, DMP phase, normalised time, last residual. The true fixture
+    pose is not observed.
+
+    ## Rewards
+    ``reward="sparse"`` (default, the paper's): ``1[L2 <= kappa]`` with L2 the distance
+    of the part frame to its fully inserted pose. ``reward="dense"`` (pure-RL baseline):
+    ``-alpha L1 + beta / (L2 + eps)`` with alpha=10, beta=0.002, eps=1e-4; the paper
+    prints ``-(alpha L1 + beta/(L2 - eps))``, which would penalise getting close; we
+    read it as a sign typo and say so.
+
+    ## Starting State
+    ``reset`` samples, with the env's seed, the start offset from the task's start
+    distribution (scaled by ``perturbation_scale``, for curricula) and the fixture's
+    calibration error; rebuilds the diagram with the fixture at its true pose; puts the
+    arm at the start by IK; and runs the DMP alone until the residual's activation time
+    (5 s), so the agent only sees the steps where it acts. ``options`` may fix any of
+    ``start_dp``, ``start_dq``, ``fixture_dp``, ``fixture_dq``, ``perturbation_scale``.
+
+    ## Episode End
+    Terminated on success (part within kappa) or when the task's force limit is broken
+    (failure, ``info["force_limit_broken"]``); truncated at the episode time (10 s) or
+    when the contact solver fails (``info["failure_reason"]`` says why).
+
+    ## Arguments
+    ``task`` (name or TaskSpec), ``reward`` ("sparse" | "dense"), ``residual_mode``
+    ("full" | "translation" | "orientation"), ``perturbation_scale`` (0..1),
+    ``diagram_config`` (RlfdDiagramConfig), ``render_mode`` (None | "ansi" | "human":
+    Meshcat), ``info_handler`` (callable(simulator) -> dict merged into ``info``).
+    """
+
+    metadata = {"render_modes": ["ansi", "human"], "render_fps": 10}
+
+    def __init__(
+        self,
+        task: str | TaskSpec = "peg_easy",
+        reward: str = "sparse",
+        residual_mode: str = "full",
+        perturbation_scale: float = 1.0,
+        diagram_config: RlfdDiagramConfig | None = None,
+        render_mode: str | None = None,
+        info_handler=None,
+    ) -> None:
+        self._init_args = dict(
+            task=task,
+            reward=reward,
+            residual_mode=residual_mode,
+            perturbation_scale=perturbation_scale,
+            diagram_config=diagram_config,
+            render_mode=render_mode,
+            info_handler=info_handler,
+        )
+        self.task = task if isinstance(task, TaskSpec) else load_task(task)
+        if reward not in ("sparse", "dense"):
+            raise ValueError(f"reward must be 'sparse' or 'dense', got {reward!r}")
+        if render_mode not in (None, "ansi", "human"):
+            raise ValueError(f"render_mode must be None, 'ansi' or 'human', got {render_mode!r}")
+        if info_handler is not None and not callable(info_handler):
+            raise ValueError("info_handler must be callable(simulator) -> dict")
+        self.reward_kind = reward
+        self.set_perturbation_scale(perturbation_scale)
+        config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
+        if residual_mode not in ("full", "translation", "orientation"):
+            raise ValueError(
+                f"residual_mode must be full, translation or orientation, got {residual_mode!r}"
+            )
+        self.diagram_config = RlfdDiagramConfig(
+            **{**config.__dict__, "residual_mode": residual_mode}
+        )
+        demo = load_demonstration(self.task.demo_path())
+        self.dmp_model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)
+        self._X_WP_demo_start = PoseFromOffset(
+            _pose_from_vector(demo.positions[0], demo.quats[0]), np.zeros(3), np.eye(4)[0]
+        )
+        self._X_WGoal_nominal = NominalGoal(self.task)
+        self._meshcat = None
+        # DrakeGymEnv writes "ascii" into self.metadata: give it an instance copy so the
+        # class attribute stays right.
+        self.metadata = {
+            **type(self).metadata,
+            "render_modes": list(type(self).metadata["render_modes"]),
+        }
+        super().__init__(
+            simulator=self._make_simulator,
+            time_step=self.diagram_config.residual_period_s,
+            action_space=gym.spaces.Box(-1.0, 1.0, (RESIDUAL_SIZE,), np.float32),
+            observation_space=gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32),
+            reward="reward",
+            action_port_id="residual",
+            observation_port_id="observation",
+            render_mode=render_mode if render_mode is not None else "ansi",
+        )
+        # Fixes: DrakeGymEnv drops a callable info_handler, and says "ascii" for "ansi".
+        self.user_info_handler = info_handler
+        self.render_mode = render_mode
+        self.metadata = {**type(self).metadata, "render_modes": ["ansi", "human"]}
+        self.rlfd: RlfdDiagram | None = None
+        self.setup: EpisodeSetup | None = None
+        self._last_observation = np.zeros(OBSERVATION_SIZE, np.float32)
+
+    # -- pickling (SubprocVecEnv, deepcopy): rebuild from the constructor arguments --
+    def __getstate__(self) -> dict:
+        return {"init_args": self._init_args}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(**state["init_args"])
+
+    def set_perturbation_scale(self, scale: float) -> None:
+        """Scales the start offsets (curriculum), in [0, 1]."""
+        if not (np.isfinite(scale) and 0.0 <= scale <= 1.0):
+            raise ValueError(f"perturbation_scale must be in [0, 1], got {scale}")
+        self.perturbation_scale = float(scale)
+
+    def _make_simulator(self, _generator=None) -> Simulator:
+        setup = self.setup
+        if self.render_mode == "human" and self._meshcat is None:
+            from pydrake.geometry import StartMeshcat
+
+            self._meshcat = StartMeshcat()
+        self.rlfd = BuildRlfdDiagram(
+            self.task,
+            self.dmp_model,
+            self.diagram_config,
+            fixture_error=FixtureErrorTransform(setup.fixture_dp, setup.fixture_dq),
+            meshcat=self._meshcat,
+        )
+        return Simulator(self.rlfd.diagram)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        gym.Env.reset(self, seed=seed)
+        options = {} if options is None else dict(options)
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+        if "perturbation_scale" in options:
+            self.set_perturbation_scale(float(options["perturbation_scale"]))
+        rng = self.np_random
+        dp, dq = sample_start_offset(self.task, rng)
+        dp = dp * self.perturbation_scale
+        # Scale the rotation angle too: q = [cos(a/2), u sin(a/2)] -> angle * scale.
+        angle = 2.0 * np.arctan2(np.linalg.norm(dq[1:]), dq[0]) * self.perturbation_scale
+        axis = dq[1:] / max(np.linalg.norm(dq[1:]), 1e-12)
+        dq = np.concatenate([[np.cos(angle / 2)], axis * np.sin(angle / 2)])
+        fixture_dp, fixture_dq = sample_fixture_error(self.task, rng)
+        self.setup = EpisodeSetup(
+            start_dp=_vector_option(options, "start_dp", 3, dp),
+            start_dq=_vector_option(options, "start_dq", 4, dq),
+            fixture_dp=_vector_option(options, "fixture_dp", 3, fixture_dp),
+            fixture_dq=_vector_option(options, "fixture_dq", 4, fixture_dq),
+        )
+        self.simulator = self._make_simulator()
+        self._setup()
+        context = self.simulator.get_mutable_context()
+        context.SetTime(0.0)
+        X_WP_start = PoseFromOffset(self._X_WP_demo_start, self.setup.start_dp, self.setup.start_dq)
+        self._failure_reason = None
+        self._force_limit_broken = False
+        try:
+            SetEpisodeStart(self.rlfd, context, X_WP_start)
+        except RuntimeError as error:
+            # An unreachable start is a bad sample, not a crash: say so clearly.
+            raise ValueError(f"start pose not reachable by the Panda: {error}") from error
+        self.action_port.FixValue(context, np.zeros(RESIDUAL_SIZE))
+        self.simulator.Initialize()
+        activation = self.rlfd.composer.config.activation_time_s
+        try:
+            self.simulator.AdvanceTo(activation)
+        except RuntimeError as error:
+            self._failure_reason = f"solver: {error.args[0] if error.args else error}"
+        observation = self._observe()
+        return observation, self._info()
+
+    def _observe(self) -> np.ndarray:
+        value = self.observation_port.Eval(self.simulator.get_context())
+        self._last_observation = np.asarray(value, dtype=np.float32)
+        return self._last_observation
+
+    def _port(self, name: str) -> np.ndarray:
+        return self.rlfd.diagram.GetOutputPort(name).Eval(self.simulator.get_context())
+
+    def _info(self) -> dict[str, Any]:
+        forces = self._port("force_metrics")
+        info = {
+            "success": bool(self._port("success")[0] > 0.5),
+            "distance_to_goal_m": float(self._port("distance_to_goal")[0]),
+            "peak_force_n": float(forces[0]),
+            "mean_force_n": float(forces[1]),
+            "force_limit_broken": self._force_limit_broken,
+            "failure_reason": self._failure_reason,
+            "time_s": float(self.simulator.get_context().get_time()),
+            "start_dp": self.setup.start_dp.copy(),
+            "start_dq": self.setup.start_dq.copy(),
+            "fixture_dp": self.setup.fixture_dp.copy(),
+            "fixture_dq": self.setup.fixture_dq.copy(),
+        }
+        if info["success"]:
+            info["insertion_time_s"] = info["time_s"]
+        if self.user_info_handler is not None:
+            info.update(self.user_info_handler(self.simulator))
+        return info
+
+    def step(self, action):
+        action = np.asarray(action, dtype=float).reshape(-1)
+        if action.shape != (RESIDUAL_SIZE,) or not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be {RESIDUAL_SIZE} finite numbers, got {action!r}")
+        if self._failure_reason is not None:
+            raise RuntimeError("step() after a solver failure: call reset()")
+        context = self.simulator.get_mutable_context()
+        self.action_port.FixValue(context, np.clip(action, -1.0, 1.0))
+        try:
+            self.simulator.AdvanceTo(context.get_time() + self.time_step)
+        except RuntimeError as error:
+            self._failure_reason = f"solver: {error.args[0] if error.args else error}"
+            return self._last_observation, 0.0, False, True, self._info()
+        observation = self._observe()
+        distance = float(self._port("distance_to_goal")[0])
+        if self.reward_kind == "sparse":
+            reward = float(self._port("reward")[0])
+        else:
+            l1 = float(np.sum(np.abs(self._port_position_error())))
+            reward = -DENSE_ALPHA * l1 + DENSE_BETA / (distance + DENSE_EPS)
+        success = distance <= self.task.kappa_m
+        limit = self.task.force_limit_n
+        if limit is not None and self._port("force_metrics")[0] > limit:
+            self._force_limit_broken = True
+        terminated = success or self._force_limit_broken
+        truncated = (not terminated) and context.get_time() >= self.task.episode_time_s - 1e-9
+        return observation, reward, terminated, truncated, self._info()
+
+    def _port_position_error(self) -> np.ndarray:
+        """p_WP - p_WGoal_true, m (for the dense reward's L1)."""
+        plant = self.rlfd.scene.plant
+        plant_context = plant.GetMyContextFromRoot(self.simulator.get_context())
+        p_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context).translation()
+        return p_WP - self.rlfd.scene.X_WGoal.translation()
+
+    def render(self):
+        if self.render_mode == "ansi":
+            if self.rlfd is None:
+                return "RlfdEnv (not reset)"
+            info = self._info()
+            return (
+                f"{self.task.name} t={info['time_s']:.2f}s "
+                f"distance={info['distance_to_goal_m'] * 1000:.1f}mm "
+                f"peak_force={info['peak_force_n']:.1f}N success={info['success']}"
+            )
+        if self.render_mode == "human":
+            self.simulator.get_system().ForcedPublish(self.simulator.get_context())
+            return None
+        return None
+
+
+def _pose_from_vector(position: np.ndarray, quat_wxyz: np.ndarray):
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    q = np.asarray(quat_wxyz, float)
+    return RigidTransform(RotationMatrix(Quaternion(q / np.linalg.norm(q))), position)
+
+
+def register_envs() -> None:
+    """Registers every id of ``ENV_IDS`` with Gymnasium (idempotent)."""
+    for env_id, task_name in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=RlfdEnv, kwargs={"task": task_name})
+
+
+register_envs()

@@ -1,0 +1,344 @@
+"""Training residual policies with Stable-Baselines3 / sb3-contrib (no hand-written RL).
+
+A run folder holds everything needed to understand and resume a run:
+
+    runs/<name>/config.json    the TrainConfig and the exact command
+    runs/<name>/checkpoints/   periodic checkpoints (resume from the newest)
+    runs/<name>/tb/            TensorBoard curves
+    runs/<name>/episodes.csv   one line per training episode (success, return, length)
+    runs/<name>/eval/          periodic evaluation (EvalCallback)
+    runs/<name>/policy.zip     the final policy (SB3 format)
+    runs/<name>/metrics.json   episodes, steps, wall-clock time, success over training
+
+Residual policies start at zero output (the last layer of the actor's mean is zero),
+so an untrained residual is the DMP alone.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import (
+    BaseCallback,
+    CallbackList,
+    CheckpointCallback,
+    EvalCallback,
+)
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
+
+from rlfd_drake.env import ENV_IDS, RlfdEnv
+from rlfd_drake.results import invoked_command
+
+ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run.
+
+    Attributes:
+        task: task name (see ``rlfd tasks``).
+        algo: "ppo", "sac" (history-stacked observations) or "recurrent_ppo" (LSTM).
+        episodes: training episodes (each up to 50 residual steps of 0.1 s).
+        seed: seed of the policy, the envs and the episode sampling.
+        envs: parallel environments (processes when > 1).
+        residual_mode: "full", "translation" or "orientation".
+        reward: "sparse" (the paper's) or "dense" (pure-RL baseline).
+        curriculum: grow the start perturbation from ``curriculum_start`` to 1 over the
+            first half of training (PPO's physical-robot recipe in the paper).
+        curriculum_start: initial perturbation scale.
+        history: observations stacked for SAC (the paper's SAC needs memory).
+        eval_every_episodes: periodic evaluation interval (0 = off).
+        eval_episodes: episodes per periodic evaluation.
+        checkpoint_every_episodes: checkpoint interval.
+        log_std_init: initial log std of PPO's Gaussian (exploration size).
+        learning_rate: optimiser step size.
+    """
+
+    task: str = "peg_easy"
+    algo: str = "ppo"
+    episodes: int = 700
+    seed: int = 0
+    envs: int = 2
+    residual_mode: str = "full"
+    reward: str = "sparse"
+    curriculum: bool = False
+    curriculum_start: float = 0.25
+    history: int = 4
+    eval_every_episodes: int = 0
+    eval_episodes: int = 10
+    checkpoint_every_episodes: int = 100
+    log_std_init: float = -1.0
+    learning_rate: float = 3e-4
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
+        if self.task not in ENV_IDS.values():
+            raise ValueError(f"task must be one of {sorted(ENV_IDS.values())}, got {self.task!r}")
+        for name in ("episodes", "envs", "history", "eval_episodes", "checkpoint_every_episodes"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.eval_every_episodes < 0:
+            raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
+        if not 0.0 <= self.curriculum_start <= 1.0:
+            raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
+
+
+def _env_kwargs(config: TrainConfig) -> dict:
+    return {"task": config.task, "reward": config.reward, "residual_mode": config.residual_mode}
+
+
+def make_envs(config: TrainConfig, n_envs: int, seed: int):
+    """The (vectorised, history-stacked for SAC) training or evaluation envs."""
+    vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
+    vec_kwargs = {"start_method": "spawn"} if n_envs > 1 else None
+    venv = make_vec_env(
+        RlfdEnv,
+        n_envs=n_envs,
+        seed=seed,
+        env_kwargs=_env_kwargs(config),
+        vec_env_cls=vec_cls,
+        vec_env_kwargs=vec_kwargs,
+    )
+    if config.algo == "sac" and config.history > 1:
+        venv = VecFrameStack(venv, n_stack=config.history)
+    return venv
+
+
+def zero_residual_output(model: BaseAlgorithm) -> None:
+    """Zeroes the last layer of the actor's mean, so the untrained residual is 0."""
+    policy = model.policy
+    if hasattr(policy, "action_net"):  # PPO / RecurrentPPO
+        layer = policy.action_net
+    elif hasattr(policy, "actor"):  # SAC
+        layer = policy.actor.mu
+    else:
+        raise TypeError(f"cannot find the actor's output layer of {type(policy).__name__}")
+    with torch.no_grad():
+        layer.weight.zero_()
+        layer.bias.zero_()
+
+
+def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
+    """A new SB3 model with the paper's architecture where it states one."""
+    common = dict(
+        env=venv,
+        seed=config.seed,
+        verbose=0,
+        learning_rate=config.learning_rate,
+        tensorboard_log=str(tensorboard_dir) if tensorboard_dir else None,
+        device="cpu",
+    )
+    if config.algo == "ppo":
+        model = PPO(
+            "MlpPolicy",
+            n_steps=max(64, 512 // config.envs),
+            batch_size=64,
+            n_epochs=10,
+            gamma=0.99,
+            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init),
+            **common,
+        )
+    elif config.algo == "sac":
+        # Paper: actor 400-300 ReLU, critic one layer of 300; memory through the stacked
+        # observation history (SB3 has no recurrent SAC).
+        model = SAC(
+            "MlpPolicy",
+            buffer_size=100_000,
+            batch_size=256,
+            learning_starts=200,
+            train_freq=(1, "step"),
+            gradient_steps=1,
+            gamma=0.99,
+            policy_kwargs=dict(net_arch=dict(pi=[400, 300], qf=[300]), activation_fn=torch.nn.ReLU),
+            **common,
+        )
+    else:
+        from sb3_contrib import RecurrentPPO
+
+        model = RecurrentPPO(
+            "MlpLstmPolicy",
+            n_steps=max(64, 512 // config.envs),
+            batch_size=64,
+            gamma=0.99,
+            policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init),
+            **common,
+        )
+    zero_residual_output(model)
+    return model
+
+
+def load_model(path: str | Path) -> BaseAlgorithm:
+    """Loads a saved policy of any of our algorithms (tried in turn)."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"policy file {str(path)!r} does not exist")
+    from sb3_contrib import RecurrentPPO
+
+    errors = []
+    for cls in (PPO, SAC, RecurrentPPO):
+        try:
+            return cls.load(str(path), device="cpu")
+        except Exception as error:  # noqa: BLE001 - try the next algorithm class
+            errors.append(f"{cls.__name__}: {error}")
+    raise ValueError(f"{path} is not a PPO, SAC or RecurrentPPO policy: {errors}")
+
+
+class EpisodeLog(BaseCallback):
+    """Writes one CSV line per finished training episode and stops after N episodes;
+    drives the start-perturbation curriculum."""
+
+    def __init__(self, config: TrainConfig, path: Path, episodes_done: int = 0):
+        super().__init__()
+        self.config = config
+        self.path = path
+        self.episodes = episodes_done
+        self.successes: list[int] = []
+        self._returns = None
+        self._lengths = None
+
+    def _on_training_start(self) -> None:
+        n = self.training_env.num_envs
+        self._returns = np.zeros(n)
+        self._lengths = np.zeros(n, dtype=int)
+        new = not self.path.exists()
+        self._file = self.path.open("a", newline="")
+        self._writer = csv.writer(self._file)
+        if new:
+            self._writer.writerow(["episode", "timesteps", "success", "return", "length"])
+        self._apply_curriculum()
+
+    def _apply_curriculum(self) -> None:
+        if not self.config.curriculum:
+            return
+        progress = min(1.0, self.episodes / max(1, 0.5 * self.config.episodes))
+        start = self.config.curriculum_start
+        scale = start + (1.0 - start) * progress
+        self.training_env.env_method("set_perturbation_scale", float(scale))
+        self.logger.record("train/perturbation_scale", scale)
+
+    def _on_step(self) -> bool:
+        rewards = self.locals["rewards"]
+        dones = self.locals["dones"]
+        infos = self.locals["infos"]
+        self._returns += rewards
+        self._lengths += 1
+        for i, done in enumerate(dones):
+            if not done:
+                continue
+            self.episodes += 1
+            success = int(bool(infos[i].get("success", False)))
+            self.successes.append(success)
+            self._writer.writerow(
+                [self.episodes, self.num_timesteps, success, self._returns[i], self._lengths[i]]
+            )
+            self._returns[i] = 0.0
+            self._lengths[i] = 0
+            recent = self.successes[-50:]
+            self.logger.record("rollout/success_rate_50", float(np.mean(recent)))
+            self.logger.record("rollout/episodes", self.episodes)
+            self._apply_curriculum()
+        self._file.flush()
+        return self.episodes < self.config.episodes
+
+    def _on_training_end(self) -> None:
+        self._file.close()
+
+
+def _newest_checkpoint(run_dir: Path) -> Path | None:
+    checkpoints = sorted(
+        (run_dir / "checkpoints").glob("*_steps.zip"),
+        key=lambda p: int(p.stem.split("_")[-2]),
+    )
+    return checkpoints[-1] if checkpoints else None
+
+
+def train(
+    config: TrainConfig, run_dir: Path, resume: bool = False, progress_bar: bool = True
+) -> dict:
+    """Trains (or resumes) a residual policy; returns the run's metrics.
+
+    A run folder that already holds a run is refused unless ``resume`` is True (a
+    finished run is never overwritten).
+    """
+    run_dir = Path(run_dir)
+    config_path = run_dir / "config.json"
+    if config_path.exists() and not resume:
+        raise FileExistsError(
+            f"run folder {run_dir} already holds a run; pass --resume or choose another --out"
+        )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if resume and config_path.exists():
+        saved = json.loads(config_path.read_text())["config"]
+        if saved != asdict(config):
+            raise ValueError(
+                f"--resume with a different configuration than {config_path}: "
+                f"saved {saved}, given {asdict(config)}"
+            )
+    config_path.write_text(
+        json.dumps({"config": asdict(config), "command": invoked_command()}, indent=2) + "\n"
+    )
+    episodes_csv = run_dir / "episodes.csv"
+    episodes_done = 0
+    if resume and episodes_csv.exists():
+        episodes_done = max(0, sum(1 for _ in episodes_csv.open()) - 1)
+
+    venv = make_envs(config, config.envs, config.seed)
+    checkpoint = _newest_checkpoint(run_dir) if resume else None
+    if checkpoint is not None:
+        model = type(load_model(checkpoint)).load(str(checkpoint), env=venv, device="cpu")
+    else:
+        model = make_model(config, venv, run_dir / "tb")
+
+    steps_per_episode = 50
+    callbacks: list[BaseCallback] = [
+        EpisodeLog(config, episodes_csv, episodes_done),
+        CheckpointCallback(
+            save_freq=max(1, config.checkpoint_every_episodes * steps_per_episode // config.envs),
+            save_path=str(run_dir / "checkpoints"),
+            name_prefix="policy",
+        ),
+    ]
+    if config.eval_every_episodes > 0:
+        eval_env = make_envs(config, 1, config.seed + 10_000)
+        callbacks.append(
+            EvalCallback(
+                eval_env,
+                n_eval_episodes=config.eval_episodes,
+                eval_freq=max(1, config.eval_every_episodes * steps_per_episode // config.envs),
+                log_path=str(run_dir / "eval"),
+                best_model_save_path=str(run_dir / "eval"),
+                deterministic=True,
+            )
+        )
+    start = time.perf_counter()
+    model.learn(
+        total_timesteps=config.episodes * steps_per_episode * 2,  # the callback stops it
+        callback=CallbackList(callbacks),
+        progress_bar=progress_bar,
+        reset_num_timesteps=checkpoint is None,
+        tb_log_name="run",
+    )
+    wall = time.perf_counter() - start
+    model.save(str(run_dir / "policy.zip"))
+    venv.close()
+    log = callbacks[0]
+    metrics = {
+        "episodes": log.episodes,
+        "timesteps": int(model.num_timesteps),
+        "wall_time_s": wall,
+        "success_rate_last_50": float(np.mean(log.successes[-50:])) if log.successes else 0.0,
+        "success_rate_all": float(np.mean(log.successes)) if log.successes else 0.0,
+    }
+    (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    return metrics
