@@ -62,6 +62,8 @@ class TrainConfig:
         checkpoint_every_episodes: checkpoint interval.
         log_std_init: initial log std of PPO's Gaussian (exploration size).
         learning_rate: optimiser step size.
+        ppo_n_steps: PPO rollout length per env between updates.
+        sac_learning_starts: SAC steps of random exploration before its first update.
     """
 
     task: str = "peg_easy"
@@ -79,13 +81,22 @@ class TrainConfig:
     checkpoint_every_episodes: int = 100
     log_std_init: float = -1.0
     learning_rate: float = 3e-4
+    ppo_n_steps: int = 256
+    sac_learning_starts: int = 200
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
         if self.task not in ENV_IDS.values():
             raise ValueError(f"task must be one of {sorted(ENV_IDS.values())}, got {self.task!r}")
-        for name in ("episodes", "envs", "history", "eval_episodes", "checkpoint_every_episodes"):
+        for name in (
+            "episodes",
+            "envs",
+            "history",
+            "eval_episodes",
+            "checkpoint_every_episodes",
+            "ppo_n_steps",
+        ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.eval_every_episodes < 0:
@@ -142,8 +153,8 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
     if config.algo == "ppo":
         model = PPO(
             "MlpPolicy",
-            n_steps=max(64, 512 // config.envs),
-            batch_size=64,
+            n_steps=config.ppo_n_steps,
+            batch_size=min(64, config.ppo_n_steps * config.envs),
             n_epochs=10,
             gamma=0.99,
             policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init),
@@ -156,7 +167,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             "MlpPolicy",
             buffer_size=100_000,
             batch_size=256,
-            learning_starts=200,
+            learning_starts=config.sac_learning_starts,
             train_freq=(1, "step"),
             gradient_steps=1,
             gamma=0.99,
@@ -168,8 +179,8 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
 
         model = RecurrentPPO(
             "MlpLstmPolicy",
-            n_steps=max(64, 512 // config.envs),
-            batch_size=64,
+            n_steps=config.ppo_n_steps,
+            batch_size=min(64, config.ppo_n_steps * config.envs),
             gamma=0.99,
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init),
             **common,

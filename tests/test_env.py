@@ -1,0 +1,161 @@
+"""The Gym env: API checks, the DrakeGymEnv fixes, determinism, pickling, failures."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rlfd_drake.diagram import RlfdDiagramConfig
+from rlfd_drake.env import ENV_IDS, RlfdEnv
+
+# A short DMP-only phase keeps the tests fast; the env's logic is the same.
+FAST = RlfdDiagramConfig(residual_activation_s=0.3)
+
+
+def make_env(**kwargs) -> RlfdEnv:
+    return RlfdEnv("peg_easy", diagram_config=FAST, **kwargs)
+
+
+def test_all_ids_registered_and_make():
+    for env_id, task in ENV_IDS.items():
+        assert env_id in gym.registry
+        assert gym.registry[env_id].kwargs["task"] == task
+    env = gym.make("rlfd/PegInsertion-v0")
+    assert env.unwrapped.task.name == "peg_easy"
+    assert env.action_space.shape == (6,)
+    assert env.observation_space.shape == (26,)
+
+
+def test_gymnasium_and_sb3_check_env():
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make_env()
+    check_env(env, skip_render_check=True)
+    sb3_check_env(env, warn=True)
+
+
+def _rollout(env: RlfdEnv, seed: int, actions: np.ndarray):
+    obs, info = env.reset(seed=seed)
+    trace = [obs]
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        trace.append(obs)
+        if terminated or truncated:
+            break
+    return np.array(trace), info
+
+
+def test_same_seed_same_episode_and_different_seed_differs():
+    actions = np.random.default_rng(0).uniform(-1, 1, (4, 6)).astype(np.float32)
+    a, info_a = _rollout(make_env(), 7, actions)
+    b, info_b = _rollout(make_env(), 7, actions)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(info_a["fixture_dp"], info_b["fixture_dp"])
+    c, info_c = _rollout(make_env(), 8, actions)
+    assert not np.array_equal(info_a["start_dp"], info_c["start_dp"])
+
+
+def test_info_handler_is_not_dropped():
+    env = make_env(info_handler=lambda simulator: {"sim_time": simulator.get_context().get_time()})
+    _, info = env.reset(seed=0)
+    assert info["sim_time"] == pytest.approx(0.3)
+    _, _, _, _, info = env.step(np.zeros(6, np.float32))
+    assert info["sim_time"] == pytest.approx(0.4)
+
+
+def test_reset_options_are_accepted_and_checked():
+    env = make_env()
+    dp = np.array([0.01, -0.02, 0.03])
+    _, info = env.reset(seed=0, options={"start_dp": dp, "fixture_dp": np.zeros(3)})
+    np.testing.assert_array_equal(info["start_dp"], dp)
+    np.testing.assert_array_equal(info["fixture_dp"], np.zeros(3))
+    with pytest.raises(ValueError, match="unknown reset option"):
+        env.reset(seed=0, options={"start": 1})
+    with pytest.raises(ValueError, match="start_dq must be a unit quaternion"):
+        env.reset(seed=0, options={"start_dq": [1.0, 1.0, 0.0, 0.0]})
+
+
+def test_perturbation_scale_zero_starts_at_the_demo_start():
+    env = make_env(perturbation_scale=0.0)
+    _, info = env.reset(seed=3)
+    np.testing.assert_allclose(info["start_dp"], 0.0)
+    with pytest.raises(ValueError, match="perturbation_scale"):
+        env.set_perturbation_scale(1.5)
+
+
+def test_render_modes_are_ansi_not_ascii():
+    env = make_env(render_mode="ansi")
+    assert env.metadata["render_modes"] == ["ansi", "human"]
+    assert RlfdEnv.metadata["render_modes"] == ["ansi", "human"]
+    env.reset(seed=0)
+    assert "peg_easy" in env.render()
+    with pytest.raises(ValueError, match="render_mode"):
+        make_env(render_mode="ascii")
+
+
+def test_bad_action_is_a_clear_error():
+    env = make_env()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action must be 6 finite numbers"):
+        env.step(np.array([np.nan, 0, 0, 0, 0, 0]))
+    with pytest.raises(ValueError, match="action must be 6 finite numbers"):
+        env.step(np.zeros(3))
+
+
+def test_solver_failure_truncates_with_reason():
+    env = make_env()
+    env.reset(seed=0)
+
+    class FailingSimulator:
+        """The real simulator, except that AdvanceTo fails as SAP can."""
+
+        def __init__(self, simulator):
+            self._simulator = simulator
+
+        def __getattr__(self, name):
+            return getattr(self._simulator, name)
+
+        def AdvanceTo(self, _time):
+            raise RuntimeError("SAP did not converge (forced by the test)")
+
+    env.simulator = FailingSimulator(env.simulator)
+    obs, reward, terminated, truncated, info = env.step(np.zeros(6, np.float32))
+    assert truncated and not terminated and reward == 0.0
+    assert info["failure_reason"].startswith("solver: SAP did not converge")
+    assert obs.shape == (26,)
+
+
+def test_episode_ends_by_time_limit():
+    env = RlfdEnv("peg_easy", diagram_config=RlfdDiagramConfig(residual_activation_s=9.5))
+    # Start far off so the DMP cannot have inserted by 10 s; push up with the residual.
+    env.reset(seed=0, options={"fixture_dp": np.array([0.01, 0.0, 0.0])})
+    done = False
+    steps = 0
+    while not done:
+        _, _, terminated, truncated, info = env.step(np.array([0, 0, 1, 0, 0, 0], np.float32))
+        steps += 1
+        done = terminated or truncated
+    assert truncated and not info["success"]
+    assert steps == 5
+    assert info["time_s"] == pytest.approx(10.0)
+
+
+def test_pickles_and_runs_in_subproc_vec_env():
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    env = make_env()
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone.task.name == "peg_easy"
+    venv = SubprocVecEnv([make_env, make_env], start_method="spawn")
+    try:
+        venv.seed(0)
+        obs = venv.reset()
+        assert obs.shape == (2, 26)
+        obs, rewards, dones, infos = venv.step(np.zeros((2, 6), np.float32))
+        assert obs.shape == (2, 26) and len(infos) == 2
+    finally:
+        venv.close()
