@@ -10,6 +10,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+
+import numpy as np
 
 
 def _print_json(data: dict) -> None:
@@ -57,6 +60,102 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demo_record(args: argparse.Namespace) -> int:
+    from rlfd_drake.demonstration import save_demonstration
+    from rlfd_drake.expert import record_demonstration
+    from rlfd_drake.tasks import load_task
+
+    task = load_task(args.task, check_demo=False)
+    demo = record_demonstration(task, seed=args.seed)
+    path = save_demonstration(demo, args.out, overwrite=args.overwrite)
+    print(f"recorded {len(demo.times)} poses over {demo.duration:.2f} s -> {path}")
+    return 0
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from rlfd_drake.demonstration import load_demonstration
+    from rlfd_drake.dmp import DmpConfig, fit_cartesian_dmp, rollout
+    from rlfd_drake.geometry import quat_error
+
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(f"{out} exists; pass --overwrite to replace it")
+    if out.suffix != ".npz":
+        raise ValueError(f"--out must end in .npz, got {str(out)!r}")
+    demo = load_demonstration(args.demo)
+    config = DmpConfig(
+        n_basis_translation=args.basis_translation, n_basis_orientation=args.basis_orientation
+    )
+    model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats, config)
+    _, positions, _, quats, _ = rollout(model, dt=float(np.median(np.diff(demo.times))))
+    n = min(len(positions), len(demo.positions))
+    rmse_mm = 1000 * float(np.sqrt(np.mean(np.sum((positions[:n] - demo.positions[:n]) ** 2, 1))))
+    angles = np.linalg.norm(quat_error(demo.quats[:n], quats[:n]), axis=1)
+    rmse_deg = float(np.degrees(np.sqrt(np.mean(angles**2))))
+    np.savez(
+        out,
+        weights_translation=model.weights_translation,
+        weights_orientation=model.weights_orientation,
+        y0=model.y0,
+        g=model.g,
+        q0=model.q0,
+        qg=model.qg,
+        tau=model.tau,
+        n_basis_translation=args.basis_translation,
+        n_basis_orientation=args.basis_orientation,
+    )
+    print(
+        json.dumps({"out": str(out), "position_rmse_mm": rmse_mm, "orientation_rmse_deg": rmse_deg})
+    )
+    return 0
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from rlfd_drake.train import TrainConfig, train
+
+    config = TrainConfig(
+        task=args.task,
+        algo=args.algo,
+        episodes=args.episodes,
+        seed=args.seed,
+        envs=args.envs,
+        residual_mode=args.residual_mode,
+        reward=args.reward,
+        curriculum=args.curriculum,
+        eval_every_episodes=args.eval_every,
+    )
+    out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
+    metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
+    _print_json({"run": str(out), **metrics})
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from rlfd_drake.evaluate import evaluate, write_evaluation
+
+    result = evaluate(
+        args.task,
+        args.policy,
+        episodes=args.episodes,
+        seed=args.seed,
+        workers=args.workers,
+        grid=not args.random_starts,
+        residual_mode=args.residual_mode,
+    )
+    name = args.name or f"eval_{args.task}_{Path(args.policy).stem}_s{args.seed}"
+    paths = write_evaluation(result, name)
+    if args.json:
+        _print_json(result)
+    else:
+        print(
+            f"{args.task} {args.policy}: success {100 * result['success_rate']:.1f}% "
+            f"+- {100 * result['success_std']:.1f} over {result['episodes']} episodes"
+        )
+        for path in paths:
+            print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rlfd", description="Residual Learning from Demonstration on Drake."
@@ -75,6 +174,56 @@ def build_parser() -> argparse.ArgumentParser:
         "--study", action="store_true", help="sim only: add the time-step stability study"
     )
     bench.set_defaults(func=_cmd_bench)
+
+    demo = sub.add_parser("demo", help="demonstrations (and, with no subcommand, the main demo)")
+    demo_sub = demo.add_subparsers(dest="demo_command")
+    record = demo_sub.add_parser("record", help="record a scripted-expert demonstration")
+    record.add_argument("--task", required=True)
+    record.add_argument("--out", required=True, help="file .csv or .npz")
+    record.add_argument("--seed", type=int, default=0)
+    record.add_argument("--overwrite", action="store_true")
+    record.set_defaults(func=_cmd_demo_record)
+
+    fit = sub.add_parser("fit", help="fit a Cartesian DMP to a demonstration")
+    fit.add_argument("--demo", required=True, help="demonstration file .csv or .npz")
+    fit.add_argument("--out", required=True, help="DMP parameters .npz")
+    fit.add_argument("--basis-translation", type=int, default=40)
+    fit.add_argument("--basis-orientation", type=int, default=70)
+    fit.add_argument("--overwrite", action="store_true")
+    fit.set_defaults(func=_cmd_fit)
+
+    train = sub.add_parser("train", help="train a residual policy (Stable-Baselines3)")
+    train.add_argument("--task", default="peg_easy")
+    train.add_argument("--algo", choices=["ppo", "sac", "recurrent_ppo"], default="ppo")
+    train.add_argument("--episodes", type=int, default=700)
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--envs", type=int, default=2, help="parallel env processes")
+    train.add_argument(
+        "--residual-mode", choices=["full", "translation", "orientation"], default="full"
+    )
+    train.add_argument("--reward", choices=["sparse", "dense"], default="sparse")
+    train.add_argument("--curriculum", action="store_true", help="grow the start perturbation")
+    train.add_argument("--eval-every", type=int, default=0, help="evaluate every N episodes")
+    train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out")
+    train.add_argument("--no-progress", action="store_true", help="no progress bar")
+    train.set_defaults(func=_cmd_train)
+
+    evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
+    evaluate.add_argument("--task", default="peg_easy")
+    evaluate.add_argument("--policy", default="dmp", help="dmp | random | PATH to a policy zip")
+    evaluate.add_argument("--episodes", type=int, default=None, help="default: the task's grid")
+    evaluate.add_argument("--seed", type=int, default=0)
+    evaluate.add_argument("--workers", type=int, default=2)
+    evaluate.add_argument(
+        "--residual-mode", choices=["full", "translation", "orientation"], default="full"
+    )
+    evaluate.add_argument(
+        "--random-starts", action="store_true", help="sample starts instead of the grid"
+    )
+    evaluate.add_argument("--name", help="results file stem")
+    evaluate.add_argument("--json", action="store_true", help="print the JSON result")
+    evaluate.set_defaults(func=_cmd_evaluate)
     return parser
 
 

@@ -51,7 +51,9 @@ class RlfdDiagramConfig:
         impedance: Cartesian impedance controller (500 Hz).
         extrapolator: quintic extrapolation of the DMP set-points.
         residual_mode: "full", "translation", "orientation" or "off".
-        max_translation_m, max_rotation_rad: physical bounds of a residual of 1.
+        max_translation_m, max_rotation_rad: physical bounds of a residual of 1 (1 cm,
+            5 deg: a few times the fixture calibration errors; larger bounds make
+            early exploration knock the part off a hole it would have found).
         residual_activation_s: when the residual starts acting; None = the task's
             (5 s: the paper's simulated half-episode).
         residual_period_s: residual policy period (10 Hz).
@@ -63,8 +65,8 @@ class RlfdDiagramConfig:
     impedance: CartesianImpedanceConfig = field(default_factory=CartesianImpedanceConfig)
     extrapolator: QuinticExtrapolatorConfig = field(default_factory=QuinticExtrapolatorConfig)
     residual_mode: str = "full"
-    max_translation_m: float = 0.02
-    max_rotation_rad: float = 0.26
+    max_translation_m: float = 0.01
+    max_rotation_rad: float = 0.087
     residual_activation_s: float | None = None
     residual_period_s: float = 0.1
     log_period_s: float = 0.01

@@ -90,8 +90,8 @@ class RlfdEnv(DrakeGymEnv):
 
     ## Action Space
     ``Box(-1, 1, (6,), float32)``: the residual ``[dp (3), r (3)]``. ``dp`` is scaled to
-    ``max_translation_m`` (2 cm) and added to the DMP position; ``r`` is an angle-axis
-    vector scaled to ``max_rotation_rad`` (15 deg), ``Q_delta = [cos(a/2), r/|r|
+    ``max_translation_m`` (1 cm) and added to the DMP position; ``r`` is an angle-axis
+    vector scaled to ``max_rotation_rad`` (5 deg), ``Q_delta = [cos(a/2), r/|r|
     sin(a/2)]`` composed as ``Q_f = Q_delta o Q_b``. ``residual_mode`` may restrict it to
     translation or orientation. The action is held for one step (0.1 s).
 

@@ -60,10 +60,13 @@ class TrainConfig:
         eval_every_episodes: periodic evaluation interval (0 = off).
         eval_episodes: episodes per periodic evaluation.
         checkpoint_every_episodes: checkpoint interval.
-        log_std_init: initial log std of PPO's Gaussian (exploration size).
+        log_std_init: initial log std of the policy's Gaussian (exploration size; for
+            SAC before its tanh squashing): small, so early exploration is a gentle
+            jiggle around the DMP rather than uniform noise over the residual's range.
         learning_rate: optimiser step size.
         ppo_n_steps: PPO rollout length per env between updates.
-        sac_learning_starts: SAC steps of random exploration before its first update.
+        sac_learning_starts: SAC steps before its first update (SB3 samples those
+            uniformly over the action space, which here means large random residuals).
     """
 
     task: str = "peg_easy"
@@ -79,10 +82,10 @@ class TrainConfig:
     eval_every_episodes: int = 0
     eval_episodes: int = 10
     checkpoint_every_episodes: int = 100
-    log_std_init: float = -1.0
+    log_std_init: float = -1.5
     learning_rate: float = 3e-4
     ppo_n_steps: int = 256
-    sac_learning_starts: int = 200
+    sac_learning_starts: int = 0
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -126,13 +129,18 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
     return venv
 
 
-def zero_residual_output(model: BaseAlgorithm) -> None:
-    """Zeroes the last layer of the actor's mean, so the untrained residual is 0."""
+def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
+    """Zeroes the last layer of the actor's mean, so the untrained residual is 0; for
+    SAC (whose log std is a layer, not a parameter) starts the log std at
+    ``log_std_init``."""
     policy = model.policy
-    if hasattr(policy, "action_net"):  # PPO / RecurrentPPO
+    if hasattr(policy, "action_net"):  # PPO / RecurrentPPO (log std set by policy_kwargs)
         layer = policy.action_net
     elif hasattr(policy, "actor"):  # SAC
         layer = policy.actor.mu
+        with torch.no_grad():
+            policy.actor.log_std.weight.zero_()
+            policy.actor.log_std.bias.fill_(log_std_init)
     else:
         raise TypeError(f"cannot find the actor's output layer of {type(policy).__name__}")
     with torch.no_grad():
@@ -185,7 +193,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init),
             **common,
         )
-    zero_residual_output(model)
+    zero_residual_output(model, config.log_std_init)
     return model
 
 
