@@ -18,6 +18,7 @@ quaternion.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,9 +74,12 @@ class QuinticExtrapolator(LeafSystem):
     The discrete state (history and coefficients) is updated at the source rate;
     the outputs are evaluated from it at whatever time a consumer samples them (the
     500 Hz controller), so they are exact at any rate and cost one small polynomial
-    evaluation per read. Before the first sample the outputs are the identity pose
-    and zero twist. A sample taken twice at the same time (initialisation followed
-    by the periodic event at t = 0) replaces the newest one.
+    evaluation per read. Before the first sample (a context that has not been
+    initialised, which is what every other system's initialisation event sees,
+    since Drake handles those events simultaneously) the outputs pass the source's
+    inputs through: the controller's first torque then targets the DMP's start, not
+    an arbitrary pose. A sample taken twice at the same time (initialisation
+    followed by the periodic event at t = 0) replaces the newest one.
     """
 
     def __init__(
@@ -93,27 +97,26 @@ class QuinticExtrapolator(LeafSystem):
             n: np.linalg.inv(hermite_matrix(np.arange(-(n - 1), 1, dtype=float)))
             for n in range(1, _MAX_SAMPLES + 1)
         }
-        # Powers of the value and derivative rows of the basis, evaluated together:
-        # B(s) = ([s^k], [k s^(k-1)]) = factor * s ** exponent, reshaped (2, 6).
+        # Factors of the value and derivative rows of the basis B(s) = ([s^k],
+        # [k s^(k-1) / h]) (derivative per second).
         k = np.arange(2 * _MAX_SAMPLES, dtype=float)
-        self._exponent = np.concatenate([k, np.maximum(k - 1.0, 0.0)])
         self._factor = np.concatenate([np.ones_like(k), k / h])
         self._X_port = self.DeclareVectorInputPort("X_WE_dmp", 7)
         self._V_port = self.DeclareVectorInputPort("V_WE_dmp", 6)
         self.DeclareDiscreteState(_STATE_SIZE)
         self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
+        prerequisites = {
+            self.all_state_ticket(),
+            self.time_ticket(),
+            self._X_port.ticket(),
+            self._V_port.ticket(),
+        }
         self.DeclareVectorOutputPort(
-            "X_WE_desired",
-            7,
-            self._calc_X,
-            prerequisites_of_calc={self.all_state_ticket(), self.time_ticket()},
+            "X_WE_desired", 7, self._calc_X, prerequisites_of_calc=prerequisites
         )
         self.DeclareVectorOutputPort(
-            "V_WE_desired",
-            6,
-            self._calc_V,
-            prerequisites_of_calc={self.all_state_ticket(), self.time_ticket()},
+            "V_WE_desired", 6, self._calc_V, prerequisites_of_calc=prerequisites
         )
 
     # -- update at the source rate ------------------------------------------------
@@ -158,31 +161,39 @@ class QuinticExtrapolator(LeafSystem):
     def _evaluate(self, x: np.ndarray, t: float) -> np.ndarray:
         """(2, 6): [value; rate per second] of [p, r] at time t from the state x."""
         s = (t - x[_T_REF]) / self._h
-        basis = (self._factor * s**self._exponent).reshape(2, 2 * _MAX_SAMPLES)
+        # Scalar powers (cheaper than numpy on 12 entries), then one (2, 6) @ (6, 6).
+        s2 = s * s
+        s3 = s2 * s
+        s4 = s3 * s
+        k = self._factor
+        basis = np.array(
+            [
+                [1.0, s, s2, s3, s4, s4 * s],
+                [0.0, k[7], k[8] * s, k[9] * s2, k[10] * s3, k[11] * s4],
+            ]
+        )
         return basis @ x[_COEFFS].reshape(2 * _MAX_SAMPLES, 6)
 
     def _calc_X(self, context: Context, output: BasicVector) -> None:
         x = context.get_discrete_state(0).get_value()
         if x[_N] == 0:
-            output.SetFromVector(np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]))
+            output.SetFromVector(self._X_port.Eval(context))
             return
         value = self._evaluate(x, context.get_time())[0]
-        Q_ref = x[_Q_REF]
         r = value[3:]
-        angle = float(np.sqrt(r @ r))
-        if angle == 0.0:
-            Q = Q_ref
-        else:
-            dQ = AngleAxis(angle, r / angle).quaternion()
-            Q = dQ.multiply(Quaternion(Q_ref)).wxyz()
+        angle = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         out = output.get_mutable_value()
         out[:3] = value[:3]
-        out[3:] = Q
+        if angle == 0.0:
+            out[3:] = x[_Q_REF]
+        else:
+            dQ = AngleAxis(angle, r / angle).quaternion()
+            out[3:] = dQ.multiply(Quaternion(x[_Q_REF])).wxyz()
 
     def _calc_V(self, context: Context, output: BasicVector) -> None:
         x = context.get_discrete_state(0).get_value()
         if x[_N] == 0:
-            output.SetFromVector(np.zeros(6))
+            output.SetFromVector(self._V_port.Eval(context))
             return
         value, rate = self._evaluate(x, context.get_time())
         out = output.get_mutable_value()

@@ -1,0 +1,213 @@
+"""System tests of the built rLfD diagram (rates, insertion, torques, tracking, residual).
+
+One zero-residual 10 s episode of the ``peg`` task from the demonstration's start is
+simulated once per module (about 5 s wall); a short episode with a policy inside the
+diagram checks the 10 Hz residual path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.common.eigen_geometry import AngleAxis, Quaternion
+from pydrake.math import RigidTransform
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.analysis import Simulator
+
+from rlfd_drake.control_math import cartesian_impedance_torque
+from rlfd_drake.demonstration import load_demonstration
+from rlfd_drake.diagram import (
+    BuildRlfdDiagram,
+    RlfdDiagramConfig,
+    SetEpisodeStart,
+)
+from rlfd_drake.dmp import fit_cartesian_dmp
+from rlfd_drake.expert import quat_to_drake_rotation
+from rlfd_drake.panda import PANDA_TORQUE_LIMITS_NM
+from rlfd_drake.tasks import load_task
+
+EPISODE_S = 10.0
+#: Position tracking of the DMP set-point by the impedance controller in free space
+#: (the part's actual position against the extrapolated base set-point), m.
+FREE_SPACE_TRACKING_TOL_M = 0.004
+#: Joint speeds stay below the Panda's rated limits (2.17-2.61 rad/s): a blow-up of the
+#: sampled controller shows as hundreds of rad/s.
+MAX_JOINT_SPEED_RAD_S = 1.0
+
+
+@pytest.fixture(scope="module")
+def peg():
+    task = load_task("peg")
+    demo = load_demonstration(task.demo_path())
+    model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)
+    X_WP_start = RigidTransform(quat_to_drake_rotation(demo.quats[0]), demo.positions[0])
+    return task, model, X_WP_start
+
+
+@pytest.fixture(scope="module")
+def episode(peg):
+    """A zero-residual 10 s episode; torques and joint speeds recorded at every step."""
+    task, model, X_WP_start = peg
+    rlfd = BuildRlfdDiagram(task, model)
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.zeros(6))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    torque_port = rlfd.controller.GetOutputPort("panda_torque")
+    controller_context = rlfd.controller.GetMyContextFromRoot(context)
+    plant = rlfd.scene.plant
+    plant_context = plant.GetMyContextFromRoot(context)
+    torques, speeds = [], []
+
+    def monitor(root_context):
+        torques.append(np.array(torque_port.Eval(controller_context)))
+        speeds.append(plant.GetVelocities(plant_context, rlfd.scene.panda))
+
+    simulator.set_monitor(monitor)
+    simulator.Initialize()
+    simulator.AdvanceTo(EPISODE_S)
+    simulator.clear_monitor()
+    return rlfd, context, np.array(torques), np.array(speeds)
+
+
+def _log(rlfd, context, name):
+    log = rlfd.logs[name].FindLog(context)
+    return log.sample_times(), log.data()
+
+
+def test_periods_of_the_four_systems(peg):
+    task, model, _ = peg
+    rlfd = BuildRlfdDiagram(task, model, policy=lambda obs: np.zeros(6))
+
+    def period(system):
+        attribute = system.GetUniquePeriodicDiscreteUpdateAttribute()
+        assert attribute is not None, system.get_name()
+        assert attribute.offset_sec() == 0.0
+        return attribute.period_sec()
+
+    assert period(rlfd.dmp) == pytest.approx(0.01)
+    assert period(rlfd.residual_policy) == pytest.approx(0.1)
+    assert period(rlfd.controller) == pytest.approx(0.002)
+    assert rlfd.scene.plant.time_step() == pytest.approx(0.002)
+    # The extrapolator samples its 100 Hz source at the source's rate; its outputs are
+    # polynomials of time (time is a prerequisite), so the 500 Hz controller reads a
+    # fresh value at every one of its own updates (see test_base_is_extrapolated...).
+    assert period(rlfd.extrapolator) == pytest.approx(rlfd.dmp.period_s)
+    assert rlfd.extrapolator.config.source_period_s == pytest.approx(0.01)
+
+
+def test_zero_residual_inserts_the_peg(episode):
+    rlfd, context, _, _ = episode
+    diagram = rlfd.diagram
+    distance = diagram.GetOutputPort("distance_to_goal").Eval(context)[0]
+    assert diagram.GetOutputPort("success").Eval(context)[0] == 1.0
+    assert distance < rlfd.task.kappa_m
+    assert diagram.GetOutputPort("reward").Eval(context)[0] == 1.0
+
+
+def test_torques_within_limits_and_joint_speeds_sane(episode):
+    _, _, torques, speeds = episode
+    assert torques.shape[0] >= int(EPISODE_S / 0.002)
+    assert np.all(np.isfinite(torques))
+    assert np.all(np.abs(torques) <= PANDA_TORQUE_LIMITS_NM + 1e-9)
+    assert np.max(np.abs(speeds)) < MAX_JOINT_SPEED_RAD_S
+
+
+def test_first_torque_holds_the_start(episode):
+    """The controller's initialisation reads the DMP start (the extrapolator passes its
+    source through before its first sample): the arm starts without a kick."""
+    _, _, torques, speeds = episode
+    assert np.all(np.abs(torques[0]) < 0.5 * PANDA_TORQUE_LIMITS_NM)
+    assert np.max(np.abs(speeds[:50])) < 0.05  # first 0.1 s, rad/s
+
+
+def test_controller_tracks_the_dmp_in_free_space(episode):
+    rlfd, context, _, _ = episode
+    t, X_base = _log(rlfd, context, "X_WE_base")
+    _, obs = _log(rlfd, context, "observation")
+    scale = rlfd.observer.config.position_scale_m
+    p_WP = obs[0:3] * scale + rlfd.X_WGoal_nominal.translation()[:, None]
+    approach = (t >= 0.1) & (t <= 4.0)  # the part is well above the fixture
+    error = np.linalg.norm(X_base[:3, approach] - p_WP[:, approach], axis=0)
+    assert np.max(error) < FREE_SPACE_TRACKING_TOL_M
+    _, forces = _log(rlfd, context, "force_metrics")
+    assert np.all(forces[0, approach] == 0.0)  # no contact during the approach
+
+
+def test_composer_leaves_the_base_untouched_with_zero_residual(episode):
+    rlfd, context, _, _ = episode
+    _, X_base = _log(rlfd, context, "X_WE_base")
+    _, X_desired = _log(rlfd, context, "X_WE_desired")
+    np.testing.assert_array_equal(X_desired, X_base)
+
+
+def test_controller_law_matches_the_reference_maths(episode):
+    """The controller's scalar fast path equals control_math's impedance law."""
+    rlfd, _, _, _ = episode
+    controller = rlfd.controller
+    plant = controller._plant
+    ctx = plant.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    frame_E = plant.GetFrameByName("controlled_frame_E")
+    for _ in range(5):
+        x = np.concatenate([controller._q_nominal + rng.normal(0, 0.2, 7), rng.normal(0, 0.3, 7)])
+        plant.SetPositionsAndVelocities(ctx, x)
+        X_WE = frame_E.CalcPoseInWorld(ctx)
+        dq = rng.normal(0, 0.3, 3)
+        Q_d = AngleAxis(np.linalg.norm(dq), dq / np.linalg.norm(dq)).quaternion()
+        Q_d = Q_d.multiply(X_WE.rotation().ToQuaternion())
+        X_d = np.concatenate([X_WE.translation() + rng.normal(0, 0.01, 3), -Q_d.wxyz()])
+        V_d = rng.normal(0, 0.05, 6)
+        J = plant.CalcJacobianSpatialVelocity(
+            ctx, JacobianWrtVariable.kV, frame_E, np.zeros(3), plant.world_frame(),
+            plant.world_frame(),
+        )  # fmt: skip
+        aa = AngleAxis(Quaternion(X_d[3:]).multiply(X_WE.rotation().ToQuaternion().conjugate()))
+        e = np.concatenate([aa.angle() * aa.axis(), X_d[:3] - X_WE.translation()])
+        config = controller.config
+        tau_posture = (
+            config.nullspace_stiffness_Nm_per_rad * (controller._q_nominal - x[:7])
+            - config.nullspace_damping_Nms_per_rad * x[7:]
+        )
+        expected = cartesian_impedance_torque(
+            J, e, V_d - J @ x[7:], controller._K, controller.nominal_damping, tau_posture,
+            plant.CalcGravityGeneralizedForces(ctx), PANDA_TORQUE_LIMITS_NM,
+        )  # fmt: skip
+        np.testing.assert_allclose(controller.CalcTorque(x, X_d, V_d), expected, atol=1e-9)
+
+
+def test_policy_inside_the_diagram_acts_at_10_hz(peg):
+    task, model, X_WP_start = peg
+    calls = []
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        # Normalised time obs[19]: a different action at every policy update.
+        calls.append(float(obs[19]))
+        return np.full(6, 5.0 * obs[19])
+
+    config = RlfdDiagramConfig(residual_activation_s=0.5)
+    rlfd = BuildRlfdDiagram(task, model, config, policy=policy)
+    assert not any(
+        rlfd.diagram.get_input_port(i).get_name() == "residual"
+        for i in range(rlfd.diagram.num_input_ports())
+    )
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.Initialize()
+    simulator.AdvanceTo(1.0)
+    t, residual = _log(rlfd, context, "residual")
+    # Piecewise constant, equal to the action of the last update strictly before the
+    # sample (a log at t_k records what the diagram saw just before its update at t_k),
+    # the policy's action at the update t_j being 5 * t_j / 10 s (float32 obs).
+    t_update = np.maximum(np.ceil(t / 0.1 - 1e-9) - 1.0, 0.0) * 0.1
+    np.testing.assert_allclose(residual, np.tile(0.5 * t_update, (6, 1)), atol=1e-6)
+    assert np.unique(np.round(residual[0], 6)).size == 10  # ten distinct held actions
+    assert len(calls) == 1 + 10  # initialisation + updates at 0, 0.1, ..., 0.9 s
+    # The composer applies it after activation: translation max_translation_m * a.
+    _, X_base = _log(rlfd, context, "X_WE_base")
+    _, X_desired = _log(rlfd, context, "X_WE_desired")
+    before, after = t < 0.5, t >= 0.5
+    np.testing.assert_array_equal(X_desired[:, before], X_base[:, before])
+    dp = X_desired[:3, after] - X_base[:3, after]
+    np.testing.assert_allclose(dp, config.max_translation_m * residual[:3, after], atol=1e-12)
