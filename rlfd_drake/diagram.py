@@ -57,7 +57,8 @@ class RlfdDiagramConfig:
         residual_activation_s: when the residual starts acting; None = the task's
             (5 s: the paper's simulated half-episode).
         residual_period_s: residual policy period (10 Hz).
-        log_period_s: period of the episode logs.
+        log_period_s: period of the episode logs; None = no logs (training, where
+            nobody reads them).
     """
 
     scene: SceneConfig = field(default_factory=SceneConfig)
@@ -69,11 +70,13 @@ class RlfdDiagramConfig:
     max_rotation_rad: float = 0.087
     residual_activation_s: float | None = None
     residual_period_s: float = 0.1
-    log_period_s: float = 0.01
+    log_period_s: float | None = 0.01
 
     def __post_init__(self) -> None:
         for name in ("dmp_period_s", "residual_period_s", "log_period_s"):
             value = getattr(self, name)
+            if value is None and name == "log_period_s":
+                continue
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number of seconds, got {value}")
         if self.residual_mode not in ("full", "translation", "orientation", "off"):
@@ -233,17 +236,29 @@ def BuildRlfdDiagram(
     builder.ExportOutput(dmp_system.GetOutputPort("phase"), "phase")
 
     period = config.log_period_s
-    logs = {
-        "panda_state": LogVectorOutput(plant.get_state_output_port(scene.panda), builder, period),
-        "X_WE_desired": LogVectorOutput(composer.GetOutputPort("X_WE_desired"), builder, period),
-        "X_WE_base": LogVectorOutput(extrapolator.GetOutputPort("X_WE_desired"), builder, period),
-        "residual": LogVectorOutput(residual_source, builder, period),
-        "observation": LogVectorOutput(observer.GetOutputPort("observation"), builder, period),
-        "distance_to_goal": LogVectorOutput(
-            observer.GetOutputPort("distance_to_goal"), builder, period
-        ),
-        "force_metrics": LogVectorOutput(observer.GetOutputPort("force_metrics"), builder, period),
-    }
+    logs = (
+        {}
+        if period is None
+        else {
+            "panda_state": LogVectorOutput(
+                plant.get_state_output_port(scene.panda), builder, period
+            ),
+            "X_WE_desired": LogVectorOutput(
+                composer.GetOutputPort("X_WE_desired"), builder, period
+            ),
+            "X_WE_base": LogVectorOutput(
+                extrapolator.GetOutputPort("X_WE_desired"), builder, period
+            ),
+            "residual": LogVectorOutput(residual_source, builder, period),
+            "observation": LogVectorOutput(observer.GetOutputPort("observation"), builder, period),
+            "distance_to_goal": LogVectorOutput(
+                observer.GetOutputPort("distance_to_goal"), builder, period
+            ),
+            "force_metrics": LogVectorOutput(
+                observer.GetOutputPort("force_metrics"), builder, period
+            ),
+        }
+    )
     if meshcat is not None:
         from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
         from pydrake.visualization import AddDefaultVisualization

@@ -163,8 +163,9 @@ class RlfdEnv(DrakeGymEnv):
             raise ValueError(
                 f"residual_mode must be full, translation or orientation, got {residual_mode!r}"
             )
+        # No episode logs: the env reads ports, and the loggers cost time every step.
         self.diagram_config = RlfdDiagramConfig(
-            **{**config.__dict__, "residual_mode": residual_mode}
+            **{**config.__dict__, "residual_mode": residual_mode, "log_period_s": None}
         )
         demo = load_demonstration(self.task.demo_path())
         self.dmp_model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)

@@ -88,3 +88,26 @@ def test_bad_config_names_the_field():
         TrainConfig(episodes=0)
     with pytest.raises(ValueError, match="task must be one of"):
         TrainConfig(task="peg_huge")
+
+
+def test_deployed_policy_matches_the_frame_stacked_training_view():
+    from stable_baselines3.common.vec_env import VecFrameStack
+
+    from rlfd_drake.train import DeployedPolicy
+
+    config = TrainConfig(algo="sac", envs=1, history=3, sac_learning_starts=4)
+    venv = VecFrameStack(fast_venv(), n_stack=3)
+    model = make_model(config, venv, None)
+    model.learn(total_timesteps=8)  # non-zero actions after updates
+    deployed = DeployedPolicy(model)
+    assert deployed.history == 3
+    venv.seed(5)
+    stacked = venv.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        newest = stacked[0, -26:]
+        expected, _ = model.predict(stacked, deterministic=True)
+        np.testing.assert_allclose(deployed(newest), expected[0], rtol=0, atol=1e-7)
+        stacked, _, _, _ = venv.step(rng.uniform(-1, 1, (1, 6)).astype(np.float32))
+    deployed.reset()
+    np.testing.assert_array_equal(deployed._stack, 0.0)
