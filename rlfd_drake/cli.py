@@ -72,6 +72,66 @@ def _cmd_demo_record(args: argparse.Namespace) -> int:
     return 0
 
 
+#: The residual policy `make demo` uses, trained by the command in its README line.
+SHIPPED_POLICY = "policies/peg_easy_ppo.zip"
+
+
+def _cmd_demo_main(args: argparse.Namespace) -> int:
+    """The main job: DMP from the shipped demo, DMP alone vs rLfD on perturbed starts,
+    and a Meshcat HTML replay of one rLfD episode."""
+    from pydrake.geometry import Meshcat
+
+    from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
+    from rlfd_drake.evaluate import evaluate, make_policy, write_evaluation
+    from rlfd_drake.paths import models_dir
+    from rlfd_drake.results import results_dir, write_result
+    from rlfd_drake.tasks import load_task
+
+    task = load_task(args.task)
+    dmp_model = load_task_dmp(task)
+    print(f"[1/4] fitted the DMP on {task.demo_path().name} ({task.name})")
+    policy_path = models_dir() / SHIPPED_POLICY
+    policies = ["dmp"] + ([str(policy_path)] if policy_path.exists() else [])
+    if len(policies) == 1:
+        print(f"      no trained residual at {policy_path}: running the DMP alone")
+    rows = {}
+    for step, spec in enumerate(policies, start=2):
+        label = "DMP only" if spec == "dmp" else "rLfD (DMP + residual)"
+        print(f"[{step}/4] {label} on {args.episodes} perturbed starts (seed {args.seed})")
+        result = evaluate(
+            task.name, spec, args.episodes, args.seed, workers=args.workers, grid=False
+        )
+        write_evaluation(result, f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}")
+        rows[label] = result
+    print()
+    print(f"{'policy':<24}{'success %':>10}{'insert s':>10}{'peak N':>9}{'mean N':>9}")
+    for label, result in rows.items():
+        time_s = result["insertion_time_s"]
+        print(
+            f"{label:<24}{100 * result['success_rate']:>10.1f}"
+            f"{(time_s if time_s is not None else float('nan')):>10.2f}"
+            f"{result['peak_force_n']:>9.1f}{result['mean_force_n']:>9.1f}"
+        )
+    print("[4/4] recording a Meshcat replay of one episode")
+    spec = make_episode_specs(task, 1, args.seed, grid=False)[0]
+    meshcat = Meshcat()
+    html = results_dir() / f"demo_{task.name}_replay.html"
+    replay = run_episode(
+        task, dmp_model, spec, make_policy(policies[-1]), meshcat=meshcat, record_html=html
+    )
+    write_result(
+        f"demo_{task.name}",
+        {
+            label: {k: r[k] for k in ("success_rate", "success_std", "episodes")}
+            for label, r in rows.items()
+        }
+        | {"replay_html": html.name, "replay_success": replay.success},
+        seed=args.seed,
+    )
+    print(f"      replay ({'success' if replay.success else 'failure'}) saved to {html}")
+    return 0
+
+
 def _cmd_fit(args: argparse.Namespace) -> int:
     from rlfd_drake.demonstration import load_demonstration
     from rlfd_drake.dmp import DmpConfig, fit_cartesian_dmp, rollout
@@ -176,6 +236,11 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(func=_cmd_bench)
 
     demo = sub.add_parser("demo", help="demonstrations (and, with no subcommand, the main demo)")
+    demo.add_argument("--task", default="peg_easy")
+    demo.add_argument("--episodes", type=int, default=20)
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--workers", type=int, default=2)
+    demo.set_defaults(func=_cmd_demo_main)
     demo_sub = demo.add_subparsers(dest="demo_command")
     record = demo_sub.add_parser("record", help="record a scripted-expert demonstration")
     record.add_argument("--task", required=True)

@@ -36,6 +36,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
 from rlfd_drake.env import ENV_IDS, RlfdEnv
+from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import invoked_command
 
 ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
@@ -206,19 +207,8 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
 
 
 def load_model(path: str | Path) -> BaseAlgorithm:
-    """Loads a saved policy of any of our algorithms (tried in turn)."""
-    path = Path(path)
-    if not path.exists():
-        raise ValueError(f"policy file {str(path)!r} does not exist")
-    from sb3_contrib import RecurrentPPO
-
-    errors = []
-    for cls in (PPO, SAC, RecurrentPPO):
-        try:
-            return cls.load(str(path), device="cpu")
-        except Exception as error:  # noqa: BLE001 - try the next algorithm class
-            errors.append(f"{cls.__name__}: {error}")
-    raise ValueError(f"{path} is not a PPO, SAC or RecurrentPPO policy: {errors}")
+    """Loads a saved policy of any of our algorithms (see ``policies.load_sb3_model``)."""
+    return load_sb3_model(path)[0]
 
 
 class EpisodeLog(BaseCallback):
@@ -372,43 +362,3 @@ def train(
     }
     (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     return metrics
-
-
-class DeployedPolicy:
-    """A trained SB3 model as the residual policy inside the diagram: obs (26,) ->
-    action (6,), deterministic. For history-stacked models (SAC) it keeps the last
-    observations exactly as ``VecFrameStack`` does (zeros before the first, newest
-    last); ``reset()`` (called by ResidualPolicy at initialisation) clears them."""
-
-    def __init__(self, model: BaseAlgorithm, observation_size: int = 26):
-        self.model = model
-        stacked = int(model.observation_space.shape[0])
-        if stacked % observation_size:
-            raise ValueError(
-                f"policy observation size {stacked} is not a multiple of {observation_size}"
-            )
-        self.history = stacked // observation_size
-        self.observation_size = observation_size
-        self._recurrent = hasattr(model.policy, "lstm_actor")
-        self.reset()
-
-    def reset(self) -> None:
-        self._stack = np.zeros(self.history * self.observation_size, dtype=np.float32)
-        self._lstm_state = None
-        self._episode_start = np.ones((1,), dtype=bool)
-
-    def __call__(self, observation: np.ndarray) -> np.ndarray:
-        obs = np.asarray(observation, dtype=np.float32)
-        self._stack = np.roll(self._stack, -self.observation_size)
-        self._stack[-self.observation_size :] = obs
-        if self._recurrent:
-            action, self._lstm_state = self.model.predict(
-                self._stack[None],
-                state=self._lstm_state,
-                episode_start=self._episode_start,
-                deterministic=True,
-            )
-            self._episode_start = np.zeros((1,), dtype=bool)
-            return action[0]
-        action, _ = self.model.predict(self._stack, deterministic=True)
-        return action

@@ -93,7 +93,7 @@ def test_bad_config_names_the_field():
 def test_deployed_policy_matches_the_frame_stacked_training_view():
     from stable_baselines3.common.vec_env import VecFrameStack
 
-    from rlfd_drake.train import DeployedPolicy
+    from rlfd_drake.policies import DeployedPolicy
 
     config = TrainConfig(algo="sac", envs=1, history=3, sac_learning_starts=4)
     venv = VecFrameStack(fast_venv(), n_stack=3)

@@ -1,0 +1,415 @@
+"""One evaluation episode of a task: its start and fixture error, its run, its metrics.
+
+An episode (paper, Sec. V) starts the robot at rest with the part P at the
+demonstration's start pose moved by a start offset (``EpisodeSpec.start_dp``,
+``start_dq``), puts the fixture at its nominal pose times an unseen error
+(``fixture_dp``, ``fixture_dq``), runs the DMP (plus a residual policy, if any, from
+the task's activation time on) for at most ``task.episode_time_s`` and reports
+success (the part within ``kappa_m`` of the true goal), insertion time and the
+contact forces felt.
+
+A simulator failure (SAP not converging raises RuntimeError) or an IK failure at the
+start is a failed episode with its reason, never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.geometry import Meshcat
+from pydrake.math import RigidTransform, RotationMatrix
+
+from rlfd_drake.demonstration import load_demonstration
+from rlfd_drake.diagram import (
+    RESIDUAL_SIZE,
+    BuildRlfdDiagram,
+    MakeSimulator,
+    PoseFromOffset,
+    RlfdDiagramConfig,
+    SetEpisodeStart,
+)
+from rlfd_drake.dmp import CartesianDmp, DmpConfig, fit_cartesian_dmp
+from rlfd_drake.geometry import quat_normalize
+from rlfd_drake.scene import FixtureErrorTransform
+from rlfd_drake.tasks import TaskSpec, evaluation_grid, sample_fixture_error, sample_start_offset
+
+__all__ = [
+    "EpisodeResult",
+    "EpisodeSpec",
+    "FAILURE_KINDS",
+    "load_task_dmp",
+    "make_episode_specs",
+    "run_episode",
+]
+
+#: The first token (before ":") of ``EpisodeResult.failure_reason``.
+FAILURE_KINDS = (
+    "solver",  # the simulator raised RuntimeError (SAP did not converge)
+    "ik",  # no joint configuration puts the part at the start pose
+    "policy",  # the residual policy returned a non-finite or wrongly shaped action
+    "force_limit",  # the contact force exceeded task.force_limit_n
+    "orientation",  # inserted within kappa_m but rotated more than kappa_deg
+    "jammed",  # entered the fixture (2 mm or more past its entrance) but stopped short
+    "on_entrance",  # came to rest on or just above the fixture, not entered
+    "missed",  # ended away from the fixture (approach did not get there)
+)
+
+# Depth below the entrance (m) beyond which the part counts as having entered.
+_ENTERED_DEPTH_M = 0.002
+# Height above the entrance (m) within which a non-entered part is "on the entrance".
+_ON_ENTRANCE_HEIGHT_M = 0.02
+
+_DMP_CACHE: dict[tuple[str, str, int, str], CartesianDmp] = {}
+
+
+def load_task_dmp(task: TaskSpec, config: DmpConfig | None = None) -> CartesianDmp:
+    """The DMP fitted on the task's committed demonstration (``task.demo_path()``).
+
+    Cached per process by task name, file path, file modification time and DMP
+    configuration, so a re-recorded demonstration is refitted.
+
+    Raises:
+        FileNotFoundError: if the demonstration file does not exist.
+    """
+    path = task.demo_path()
+    key = (task.name, str(path), path.stat().st_mtime_ns, repr(config))
+    model = _DMP_CACHE.get(key)
+    if model is None:
+        demo = load_demonstration(path)
+        model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats, config)
+        _DMP_CACHE[key] = model
+    return model
+
+
+def _demo_start_pose(dmp_model: CartesianDmp) -> RigidTransform:
+    """X_WP of the demonstration's first sample (the DMP's y0, q0)."""
+    q = quat_normalize(np.asarray(dmp_model.q0, dtype=float))
+    return RigidTransform(RotationMatrix(Quaternion(q)), np.asarray(dmp_model.y0, dtype=float))
+
+
+def _rotation_angle_deg(q_wxyz: np.ndarray) -> float:
+    """Rotation angle (deg) of a unit quaternion, in [0, 180]."""
+    w = min(1.0, abs(float(q_wxyz[0]) / float(np.linalg.norm(q_wxyz))))
+    return math.degrees(2.0 * math.acos(w))
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """What makes one episode different from another.
+
+    Attributes:
+        start_dp: start position offset (3,) of P from the demonstration start,
+            world frame, m.
+        start_dq: start rotation offset (4,) wxyz, applied in the world frame on the
+            left of the demonstration's start orientation.
+        fixture_dp: fixture position error (3,) in F, m (X_WF_true = X_WF_nominal X_err).
+        fixture_dq: fixture rotation error (4,) wxyz in F (table slope included).
+        bin_index: evaluation-grid bin (six boxes / orientation bins; 0 for the
+            uniform box), or -1 for a training-style random start.
+    """
+
+    start_dp: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_dq: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    fixture_dp: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    fixture_dq: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    bin_index: int = -1
+
+    def __post_init__(self) -> None:
+        for name, size in (("start_dp", 3), ("start_dq", 4), ("fixture_dp", 3), ("fixture_dq", 4)):
+            value = np.asarray(getattr(self, name), dtype=float).reshape(-1)
+            if value.shape != (size,) or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} must be {size} finite numbers, got {getattr(self, name)}")
+            if size == 4 and abs(np.linalg.norm(value) - 1.0) > 1e-6:
+                raise ValueError(f"{name} must be a unit quaternion, got {value}")
+            object.__setattr__(self, name, tuple(float(v) for v in value))
+
+    @property
+    def start_position_offset_m(self) -> float:
+        """|start_dp|, m."""
+        return float(np.linalg.norm(self.start_dp))
+
+    @property
+    def start_rotation_offset_deg(self) -> float:
+        """Rotation angle of start_dq, deg."""
+        return _rotation_angle_deg(np.asarray(self.start_dq))
+
+    @property
+    def fixture_rotation_error_deg(self) -> float:
+        """Rotation angle of fixture_dq (table slope included), deg."""
+        return _rotation_angle_deg(np.asarray(self.fixture_dq))
+
+
+def make_episode_specs(task: TaskSpec, n: int, seed: int, grid: bool = True) -> list[EpisodeSpec]:
+    """``n`` episode specs, identical for identical arguments.
+
+    Args:
+        task: the task.
+        n: number of episodes.
+        seed: seed of the start offsets and of the fixture errors.
+        grid: True draws the starts from the paper's evaluation grid
+            (``tasks.evaluation_grid``: bins in increasing order, evenly filled);
+            False from the training distribution (``tasks.sample_start_offset``,
+            bin_index -1).
+
+    The fixture errors come from a generator independent of the starts' (a child of
+    ``SeedSequence(seed)``), so the same seed gives the same errors with or without
+    the grid.
+    """
+    if n <= 0:
+        raise ValueError(f"n must be positive, got {n}")
+    start_seq, fixture_seq = np.random.SeedSequence(seed).spawn(2)
+    if grid:
+        starts = evaluation_grid(task, n, seed)
+    else:
+        start_rng = np.random.default_rng(start_seq)
+        starts = [(*sample_start_offset(task, start_rng), -1) for _ in range(n)]
+    fixture_rng = np.random.default_rng(fixture_seq)
+    specs = []
+    for dp, dq, b in starts:
+        f_dp, f_dq = sample_fixture_error(task, fixture_rng)
+        specs.append(
+            EpisodeSpec(
+                start_dp=tuple(dp),
+                start_dq=tuple(quat_normalize(np.asarray(dq, float))),
+                fixture_dp=tuple(f_dp),
+                fixture_dq=tuple(quat_normalize(np.asarray(f_dq, float))),
+                bin_index=int(b),
+            )
+        )
+    return specs
+
+
+@dataclass
+class EpisodeResult:
+    """Outcome and metrics of one episode.
+
+    Attributes:
+        success: the part got within ``kappa_m`` of the true goal (and within
+            ``kappa_deg`` of its orientation at the end, if the task has one), no
+            force limit was broken and the simulation did not fail.
+        insertion_time_s: first time the part was within ``kappa_m`` of the goal, s
+            (from the 100 Hz distance log; if it was there only between log samples,
+            the end of the 0.1 s chunk in which success latched); nan if never.
+        final_distance_m: |p_WP - p_WGoal_true| at the end, m (nan if never simulated).
+        final_angle_deg: rotation angle between P and the true goal at the end, deg.
+        peak_force_n: peak total contact force (sum of contact force magnitudes), N,
+            sampled every plant step (2 ms): impacts show as one-step spikes.
+        mean_force_n: time-averaged total contact force from t = 0 to the end of the
+            simulation (the episode may stop early once inserted), N.
+        peak_joint_contact_torque_nm: peak |generalised contact torque| over the arm
+            joints, N m.
+        force_limit_broken: the peak force exceeded ``task.force_limit_n``.
+        failure_reason: None on success, else "<kind>: <details>" with kind in
+            :data:`FAILURE_KINDS`.
+        sim_time_s: simulated time reached, s.
+        wall_time_s: wall-clock time of the episode (build, IK, simulation), s.
+        bin_index: the spec's bin index.
+    """
+
+    success: bool
+    insertion_time_s: float
+    final_distance_m: float
+    final_angle_deg: float
+    peak_force_n: float
+    mean_force_n: float
+    peak_joint_contact_torque_nm: float
+    force_limit_broken: bool
+    failure_reason: str | None
+    sim_time_s: float
+    wall_time_s: float
+    bin_index: int
+
+    @property
+    def failure_kind(self) -> str | None:
+        """The first token of ``failure_reason`` (one of FAILURE_KINDS), or None."""
+        return None if self.failure_reason is None else self.failure_reason.split(":")[0]
+
+
+def _final_failure_kind(task: TaskSpec, X_WF_true: RigidTransform, X_WP: RigidTransform) -> str:
+    """Classifies a run that ended without inserting: jammed / on_entrance / missed."""
+    p_FP = X_WF_true.inverse() @ X_WP.translation()
+    if p_FP[2] <= -_ENTERED_DEPTH_M:
+        return f"jammed: {1e3 * -p_FP[2]:.1f} mm deep of {1e3 * task.fixture.depth_m:.0f} mm"
+    reach = 0.5 * max(task.opening_size_m()) + task.fixture.wall_m
+    lateral = float(np.linalg.norm(p_FP[:2]))
+    where = f"{1e3 * lateral:.1f} mm off axis, height {1e3 * p_FP[2]:+.1f} mm over the entrance"
+    if lateral <= reach and p_FP[2] <= _ON_ENTRANCE_HEIGHT_M:
+        return f"on_entrance: {where}"
+    return f"missed: {where}"
+
+
+def run_episode(
+    task: TaskSpec,
+    dmp_model: CartesianDmp,
+    spec: EpisodeSpec,
+    policy: Callable[[np.ndarray], np.ndarray] | None = None,
+    diagram_config: RlfdDiagramConfig | None = None,
+    meshcat: Meshcat | None = None,
+    record_html: str | Path | None = None,
+    *,
+    stop_after_success_s: float | None = 0.5,
+    chunk_s: float = 0.1,
+) -> EpisodeResult:
+    """Runs one episode and measures it.
+
+    Args:
+        task: the task.
+        dmp_model: the base policy (e.g. ``load_task_dmp(task)``).
+        spec: start offset and fixture error.
+        policy: residual policy obs (26,) float32 -> action (6,) in [-1, 1], run inside
+            the diagram at the residual rate; None runs the DMP alone (the residual
+            input is fixed to zeros).
+        diagram_config: rates and gains (default RlfdDiagramConfig()).
+        meshcat: if given, the episode is drawn and recorded as an animation.
+        record_html: if given (with meshcat), the recording is saved there as a
+            self-contained HTML page.
+        stop_after_success_s: stop once success has latched and the part has been
+            within kappa for this long, s (checked every ``chunk_s``); None runs the
+            whole episode.
+        chunk_s: simulation is advanced in chunks of this length, s.
+
+    Returns:
+        The episode's result. Never raises for simulator, IK or policy failures.
+
+    Raises:
+        ValueError: ``record_html`` without ``meshcat``.
+    """
+    wall_start = time.perf_counter()
+    if record_html is not None and meshcat is None:
+        raise ValueError("record_html needs a meshcat to record into")
+    config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
+    X_err = FixtureErrorTransform(np.asarray(spec.fixture_dp), np.asarray(spec.fixture_dq))
+    rlfd = BuildRlfdDiagram(
+        task, dmp_model, config, policy=policy, fixture_error=X_err, meshcat=meshcat
+    )
+    diagram = rlfd.diagram
+    simulator = MakeSimulator(rlfd)
+    context = simulator.get_mutable_context()
+    if policy is None:
+        diagram.GetInputPort("residual").FixValue(context, np.zeros(RESIDUAL_SIZE))
+
+    kappa = task.kappa_m
+    nan = float("nan")
+
+    def result(failure: str | None, success: bool, **metrics: float) -> EpisodeResult:
+        return EpisodeResult(
+            success=success,
+            insertion_time_s=metrics.get("insertion_time_s", nan),
+            final_distance_m=metrics.get("final_distance_m", nan),
+            final_angle_deg=metrics.get("final_angle_deg", nan),
+            peak_force_n=metrics.get("peak_force_n", 0.0),
+            mean_force_n=metrics.get("mean_force_n", 0.0),
+            peak_joint_contact_torque_nm=metrics.get("peak_torque", 0.0),
+            force_limit_broken=bool(metrics.get("force_limit_broken", False)),
+            failure_reason=failure,
+            sim_time_s=float(context.get_time()),
+            wall_time_s=time.perf_counter() - wall_start,
+            bin_index=spec.bin_index,
+        )
+
+    X_WP_start = PoseFromOffset(
+        _demo_start_pose(dmp_model), np.asarray(spec.start_dp), spec.start_dq
+    )
+    try:
+        SetEpisodeStart(rlfd, context, X_WP_start)
+    except RuntimeError as e:
+        return result(f"ik: {_first_line(e)}", False)
+
+    if meshcat is not None:
+        meshcat.StartRecording(set_visualizations_while_recording=False)
+    failure: str | None = None
+    within_since: float | None = None
+    latched_at: float | None = None
+    force_limit_broken = False
+    success_port = diagram.GetOutputPort("success")
+    distance_port = diagram.GetOutputPort("distance_to_goal")
+    force_port = diagram.GetOutputPort("force_metrics")
+    try:
+        simulator.Initialize()
+        t_end = task.episode_time_s
+        t = 0.0
+        while t < t_end - 1e-9:
+            t = min(t + chunk_s, t_end)
+            simulator.AdvanceTo(t)
+            if task.force_limit_n is not None and force_port.Eval(context)[0] > task.force_limit_n:
+                force_limit_broken = True
+                break
+            if latched_at is None and success_port.Eval(context)[0] > 0.5:
+                latched_at = t
+            if distance_port.Eval(context)[0] <= kappa:
+                within_since = t if within_since is None else within_since
+            else:
+                within_since = None
+            if (
+                stop_after_success_s is not None
+                and success_port.Eval(context)[0] > 0.5
+                and within_since is not None
+                and t - within_since >= stop_after_success_s - 1e-9
+            ):
+                break
+    except RuntimeError as e:
+        message = _first_line(e)
+        kind = "policy" if message.startswith("ResidualPolicy") else "solver"
+        failure = f"{kind}: {message}"
+    finally:
+        if meshcat is not None:
+            meshcat.StopRecording()
+            meshcat.PublishRecording()
+            if record_html is not None:
+                Path(record_html).write_text(meshcat.StaticHtml())
+
+    forces = force_port.Eval(context)
+    log = rlfd.logs["distance_to_goal"].FindLog(context)
+    distances = log.data()[0]
+    reached = np.flatnonzero(distances <= kappa)
+    if reached.size:
+        insertion_time = float(log.sample_times()[reached[0]])
+    else:
+        # Within kappa only between log samples: the end of the chunk that latched it.
+        insertion_time = nan if latched_at is None else latched_at
+    metrics = {
+        "insertion_time_s": insertion_time,
+        "peak_force_n": float(forces[0]),
+        "mean_force_n": float(forces[1]),
+        "peak_torque": float(forces[2]),
+        "force_limit_broken": force_limit_broken,
+    }
+    plant = rlfd.scene.plant
+    X_WP = rlfd.scene.frame_P.CalcPoseInWorld(plant.GetMyContextFromRoot(context))
+    X_WGoal = rlfd.scene.X_WGoal
+    metrics["final_distance_m"] = float(np.linalg.norm(X_WP.translation() - X_WGoal.translation()))
+    metrics["final_angle_deg"] = math.degrees(
+        X_WGoal.rotation().InvertAndCompose(X_WP.rotation()).ToAngleAxis().angle()
+    )
+    if failure is not None:
+        return result(failure, False, **metrics)
+    if force_limit_broken:
+        force_log = rlfd.logs["force_metrics"].FindLog(context)
+        broken = np.flatnonzero(force_log.data()[0] > task.force_limit_n)
+        k = int(broken[0]) if broken.size else -1
+        when = (
+            f"at t = {force_log.sample_times()[k]:.2f} s, {1e3 * distances[k]:.1f} mm from the goal"
+        )
+        reason = f"force_limit: {forces[0]:.1f} N > {task.force_limit_n:g} N {when}"
+        return result(reason, False, **metrics)
+    latched = bool(success_port.Eval(context)[0] > 0.5) or reached.size > 0
+    if not latched:
+        return result(_final_failure_kind(task, rlfd.scene.X_WFixture_true, X_WP), False, **metrics)
+    if task.kappa_deg is not None and metrics["final_angle_deg"] > task.kappa_deg:
+        angle = metrics["final_angle_deg"]
+        return result(f"orientation: {angle:.1f} deg > {task.kappa_deg:g} deg", False, **metrics)
+    return result(None, True, **metrics)
+
+
+def _first_line(error: BaseException) -> str:
+    """The first non-empty line of an exception's message (Drake's are long)."""
+    for line in str(error).splitlines():
+        if line.strip():
+            return line.strip()[:300]
+    return type(error).__name__

@@ -1,0 +1,405 @@
+"""Evaluation harness: a policy over the paper's perturbation grids, in parallel, with
+the paper's metrics (success rate, insertion time, contact forces, success vs
+perturbation size) written to ``results/`` as JSON, Markdown and a PNG plot.
+
+Policies are named by a string, so that worker processes can build their own:
+
+* ``"dmp"``: the DMP alone (zero residual).
+* ``"random"``: the Random baseline (uniform corrections in [-1, 1]; which parts are
+  randomised follows ``residual_mode``), reseeded per episode from (seed, episode).
+* a path to a Stable-Baselines3 model ``.zip`` (PPO, SAC, TD3 or sb3-contrib
+  RecurrentPPO, told apart by the zip's metadata; ``"ppo:path"``, ``"sac:path"``,
+  ``"td3:path"``, ``"recurrent_ppo:path"`` force the class), run deterministically.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import time
+from collections import Counter
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from rlfd_drake.diagram import RlfdDiagramConfig
+from rlfd_drake.episode import (
+    EpisodeResult,
+    EpisodeSpec,
+    load_task_dmp,
+    make_episode_specs,
+    run_episode,
+)
+from rlfd_drake.policies import DeployedPolicy, load_sb3_model
+from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.tasks import TaskSpec, load_task
+
+__all__ = [
+    "RESULT_KEYS",
+    "evaluate",
+    "make_policy",
+    "write_evaluation",
+]
+
+#: Keys of the dict returned by :func:`evaluate`.
+RESULT_KEYS = (
+    "task",
+    "policy",
+    "residual_mode",
+    "seed",
+    "grid",
+    "episodes",
+    "success_rate",
+    "success_std",
+    "success_std_kind",
+    "insertion_time_s",
+    "insertion_time_std_s",
+    "peak_force_n",
+    "mean_force_n",
+    "forces_by_outcome",
+    "per_bin",
+    "failures",
+    "wall_time_s",
+    "episode_table",
+)
+
+_MODEL_CACHE: dict[str, tuple[object, str]] = {}
+
+
+def make_policy(policy_spec: str, residual_mode: str = "full", episode_seed: int = 0):
+    """The residual policy of ``policy_spec`` for one episode (None for "dmp").
+
+    ``episode_seed`` seeds the random baseline; a saved model is loaded once per
+    process and shared (its recurrent state is reset at every episode start).
+    """
+    if policy_spec == "dmp":
+        return None
+    if policy_spec == "random":
+        from rlfd_drake.baselines.random_policy import RandomResidualPolicy
+
+        return RandomResidualPolicy(
+            episode_seed,
+            translation=residual_mode in ("full", "translation"),
+            orientation=residual_mode in ("full", "orientation"),
+        )
+    if policy_spec not in _MODEL_CACHE:
+        try:
+            import torch
+
+            torch.set_num_threads(1)
+        except ImportError:  # pragma: no cover - torch is a dependency
+            pass
+        _MODEL_CACHE[policy_spec] = load_sb3_model(policy_spec)
+    model, kind = _MODEL_CACHE[policy_spec]
+    return DeployedPolicy(model, residual_mode)
+
+
+# --------------------------------------------------------------------------------------
+# Running episodes (in this process or in workers).
+# --------------------------------------------------------------------------------------
+_WORKER: dict[str, object] = {}
+
+
+def _init_worker(
+    task_name: str, policy_spec: str, residual_mode: str, config: RlfdDiagramConfig
+) -> None:
+    task = load_task(task_name)
+    _WORKER.update(
+        task=task,
+        dmp=load_task_dmp(task),
+        policy_spec=policy_spec,
+        residual_mode=residual_mode,
+        config=config,
+    )
+    if policy_spec not in ("dmp", "random"):
+        make_policy(policy_spec, residual_mode)  # load the model once, fail early
+
+
+def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
+    index, episode_seed, spec = job
+    policy = make_policy(_WORKER["policy_spec"], _WORKER["residual_mode"], episode_seed)
+    result = run_episode(
+        _WORKER["task"], _WORKER["dmp"], spec, policy=policy, diagram_config=_WORKER["config"]
+    )
+    return index, result
+
+
+def _binomial_std(p: float, n: int) -> float:
+    return math.sqrt(p * (1.0 - p) / n) if n > 0 else float("nan")
+
+
+def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeResult]) -> dict:
+    success = np.array([r.success for r in results], dtype=float)
+    n = len(results)
+    p = float(success.mean())
+    bins = sorted({s.bin_index for s in specs})
+    per_bin = []
+    for b in bins:
+        idx = [i for i, s in enumerate(specs) if s.bin_index == b]
+        per_bin.append(
+            {
+                "bin": b,
+                "n": len(idx),
+                "success_rate": float(success[idx].mean()),
+                "position_offset_m": float(
+                    np.mean([specs[i].start_position_offset_m for i in idx])
+                ),
+                "rotation_offset_deg": float(
+                    np.mean([specs[i].start_rotation_offset_deg for i in idx])
+                ),
+            }
+        )
+    if len(per_bin) > 1:
+        std = float(np.std([b["success_rate"] for b in per_bin]))
+        std_kind = f"std of the success rate over {len(per_bin)} bins"
+    else:
+        std = _binomial_std(p, n)
+        std_kind = "binomial sqrt(p (1 - p) / n)"
+    times = np.array([r.insertion_time_s for r in results if r.success])
+    times = times[np.isfinite(times)]
+    ok = success > 0.5
+
+    def forces(mask: np.ndarray) -> dict:
+        if not mask.any():
+            return {"n": 0, "peak_force_n": None, "mean_force_n": None}
+        chosen = [r for r, m in zip(results, mask, strict=True) if m]
+        return {
+            "n": len(chosen),
+            "peak_force_n": float(np.mean([r.peak_force_n for r in chosen])),
+            "mean_force_n": float(np.mean([r.mean_force_n for r in chosen])),
+        }
+
+    failures = Counter(r.failure_kind for r in results if r.failure_kind is not None)
+    table = {
+        "bin": [s.bin_index for s in specs],
+        "position_offset_mm": [round(1e3 * s.start_position_offset_m, 2) for s in specs],
+        "rotation_offset_deg": [round(s.start_rotation_offset_deg, 2) for s in specs],
+        "fixture_error_mm": [round(1e3 * float(np.linalg.norm(s.fixture_dp)), 2) for s in specs],
+        "fixture_error_deg": [round(s.fixture_rotation_error_deg, 2) for s in specs],
+        "success": [int(r.success) for r in results],
+        "insertion_time_s": [
+            None if math.isnan(r.insertion_time_s) else r.insertion_time_s for r in results
+        ],
+        "final_distance_mm": [round(1e3 * r.final_distance_m, 2) for r in results],
+        "peak_force_n": [round(r.peak_force_n, 2) for r in results],
+        "failure": [r.failure_reason for r in results],
+    }
+    return {
+        "success_rate": p,
+        "success_std": std,
+        "success_std_kind": std_kind,
+        "insertion_time_s": float(times.mean()) if times.size else None,
+        "insertion_time_std_s": float(times.std()) if times.size else None,
+        "peak_force_n": float(np.mean([r.peak_force_n for r in results])),
+        "mean_force_n": float(np.mean([r.mean_force_n for r in results])),
+        "forces_by_outcome": {"success": forces(ok), "failure": forces(~ok)},
+        "per_bin": per_bin,
+        "failures": dict(sorted(failures.items())),
+        "episode_table": table,
+        "sim_time_s": float(sum(r.sim_time_s for r in results)),
+        "episode_wall_time_s": float(sum(r.wall_time_s for r in results)),
+    }
+
+
+def evaluate(
+    task_name: str,
+    policy_spec: str,
+    episodes: int,
+    seed: int,
+    workers: int = 2,
+    grid: bool = True,
+    residual_mode: str = "full",
+    diagram_config: RlfdDiagramConfig | None = None,
+    progress: bool = True,
+) -> dict:
+    """Evaluates a policy on ``episodes`` starts of a task.
+
+    Args:
+        task_name: a shipped task name or a task YAML path.
+        policy_spec: "dmp", "random" or a saved SB3 model (see module docstring).
+        episodes: number of episodes (the paper: 500 for the pegs, 160 for gear/RJ-45).
+        seed: seed of the starts, fixture errors and random policies.
+        workers: processes (spawn); 1 runs in this process.
+        grid: the paper's evaluation grid (True) or training-style random starts.
+        residual_mode: "full", "translation", "orientation" or "off" (composer mode).
+        diagram_config: rates and gains (default RlfdDiagramConfig()); its
+            residual_mode is replaced by ``residual_mode``.
+        progress: show a tqdm progress bar.
+
+    Returns:
+        A JSON-serialisable dict with :data:`RESULT_KEYS`: ``success_rate`` (0..1),
+        ``success_std`` (the standard deviation of the per-bin success rates if the
+        grid has several bins, else the binomial sqrt(p (1 - p) / n);
+        ``success_std_kind`` says which), ``insertion_time_s`` (mean over successes,
+        s, None if none), ``peak_force_n`` and ``mean_force_n`` (means over episodes
+        of the episode's peak and time-averaged total contact force, N),
+        ``forces_by_outcome``, ``per_bin`` (bin, n, success_rate, mean
+        position_offset_m, mean rotation_offset_deg), ``failures`` (count per
+        failure kind), ``wall_time_s`` and a compact per-episode ``episode_table``.
+    """
+    wall_start = time.perf_counter()
+    if episodes <= 0:
+        raise ValueError(f"episodes must be positive, got {episodes}")
+    if workers <= 0:
+        raise ValueError(f"workers must be positive, got {workers}")
+    task = load_task(task_name)
+    config = replace(
+        diagram_config if diagram_config is not None else RlfdDiagramConfig(),
+        residual_mode=residual_mode,
+    )
+    specs = make_episode_specs(task, episodes, seed, grid)
+    episode_seeds = np.random.SeedSequence([seed, 1]).generate_state(episodes).tolist()
+    jobs = [(i, int(episode_seeds[i]), spec) for i, spec in enumerate(specs)]
+    init_args = (task_name, policy_spec, residual_mode, config)
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=episodes, desc=f"{task.name} {Path(policy_spec).name}", disable=not progress)
+    results: list[EpisodeResult | None] = [None] * episodes
+    success_count = 0
+
+    def collect(index: int, result: EpisodeResult) -> None:
+        nonlocal success_count
+        results[index] = result
+        success_count += int(result.success)
+        bar.update(1)
+        bar.set_postfix(success=f"{success_count}/{bar.n}")
+
+    try:
+        if workers == 1:
+            _init_worker(*init_args)
+            for job in jobs:
+                collect(*_run_one(job))
+        else:
+            ctx = multiprocessing.get_context("spawn")
+            with ctx.Pool(min(workers, episodes), _init_worker, init_args) as pool:
+                for index, result in pool.imap_unordered(_run_one, jobs):
+                    collect(index, result)
+    finally:
+        bar.close()
+
+    done = [r for r in results if r is not None]
+    summary = _summarise(task, specs, done)
+    return {
+        "task": task.name,
+        "policy": policy_spec,
+        "residual_mode": residual_mode,
+        "seed": seed,
+        "grid": grid,
+        "episodes": episodes,
+        **summary,
+        "workers": workers,
+        "wall_time_s": time.perf_counter() - wall_start,
+    }
+
+
+# --------------------------------------------------------------------------------------
+# Writing results.
+# --------------------------------------------------------------------------------------
+def _fmt(value: float | None, scale: float = 1.0, digits: int = 1) -> str:
+    return "n/a" if value is None else f"{scale * value:.{digits}f}"
+
+
+def evaluation_markdown(result: dict) -> str:
+    """A Markdown table of one evaluation (success mean +- std in %, insertion time,
+    peak and mean contact force), then the per-bin success and the failure counts."""
+    r = result
+    lines = [
+        f"# {r['task']}: {r['policy']} (residual {r['residual_mode']})",
+        "",
+        f"{r['episodes']} episodes, seed {r['seed']}, "
+        f"{'evaluation grid' if r['grid'] else 'training starts'}; "
+        f"std = {r['success_std_kind']}.",
+        "",
+        "| task | policy | success % | insertion time s | peak force N | mean force N | episodes |",
+        "|---|---|---|---|---|---|---|",
+        f"| {r['task']} | {r['policy']} | {_fmt(r['success_rate'], 100)} +- "
+        f"{_fmt(r['success_std'], 100)} | {_fmt(r['insertion_time_s'], digits=2)} | "
+        f"{_fmt(r['peak_force_n'])} | {_fmt(r['mean_force_n'], digits=2)} | {r['episodes']} |",
+        "",
+        "| bin | n | success % | mean start offset mm | mean start rotation deg |",
+        "|---|---|---|---|---|",
+    ]
+    for b in r["per_bin"]:
+        lines.append(
+            f"| {b['bin']} | {b['n']} | {_fmt(b['success_rate'], 100)} | "
+            f"{_fmt(b['position_offset_m'], 1e3)} | {_fmt(b['rotation_offset_deg'])} |"
+        )
+    failures = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "none"
+    lines += ["", f"Failures: {failures}. Wall time {r['wall_time_s']:.0f} s.", ""]
+    return "\n".join(lines)
+
+
+def _success_curve(result: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """(x, success rate, binomial std, n, x label) for the Fig. 4 style plot."""
+    per_bin = result["per_bin"]
+    if len(per_bin) > 1:
+        rotations = np.array([b["rotation_offset_deg"] for b in per_bin])
+        if np.max(rotations) > 1e-6:
+            x, label = rotations, "mean start rotation offset (deg)"
+        else:
+            x = 1e3 * np.array([b["position_offset_m"] for b in per_bin])
+            label = "mean start position offset (mm)"
+        p = np.array([b["success_rate"] for b in per_bin])
+        n = np.array([b["n"] for b in per_bin])
+    else:
+        table = result["episode_table"]
+        offsets = np.array(table["position_offset_mm"], dtype=float)
+        success = np.array(table["success"], dtype=float)
+        n_groups = int(np.clip(len(offsets) // 8, 1, 6))
+        edges = np.quantile(offsets, np.linspace(0.0, 1.0, n_groups + 1))
+        groups = np.clip(np.searchsorted(edges, offsets, side="right") - 1, 0, n_groups - 1)
+        keep = [g for g in range(n_groups) if np.any(groups == g)]
+        x = np.array([offsets[groups == g].mean() for g in keep])
+        p = np.array([success[groups == g].mean() for g in keep])
+        n = np.array([np.sum(groups == g) for g in keep])
+        label = "start position offset (mm), quantile groups"
+    std = np.sqrt(p * (1.0 - p) / np.maximum(n, 1))
+    return x, p, std, n, label
+
+
+def plot_success_vs_perturbation(results: list[dict], path: Path) -> Path:
+    """Success rate against perturbation size (paper Fig. 4), one line per result,
+    binomial error bars; written as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
+    label = ""
+    for result in results:
+        x, p, std, _, label = _success_curve(result)
+        ax.errorbar(x, 100 * p, yerr=100 * std, marker="o", capsize=3, label=result["policy"])
+    ax.set_xlabel(label)
+    ax.set_ylabel("success (%)")
+    ax.set_ylim(-5, 105)
+    ax.set_title(results[0]["task"])
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def write_evaluation(result: dict, name: str, command: str | None = None) -> dict[str, Path]:
+    """Writes ``results/<name>.json`` (via ``results.write_result``: command, seed,
+    date), ``results/<name>.md`` and ``results/<name>.png``; returns their paths."""
+    json_path = write_result(name, result, seed=result.get("seed"), command=command)
+    md_path = results_dir() / f"{name}.md"
+    md_path.write_text(evaluation_markdown(result))
+    png_path = plot_success_vs_perturbation([result], results_dir() / f"{name}.png")
+    return {"json": json_path, "md": md_path, "png": png_path}
+
+
+def result_from_json(path: str | Path) -> dict:
+    """The evaluation dict stored in a ``write_evaluation`` JSON file."""
+    return json.loads(Path(path).read_text())["data"]
+
+
+def episode_result_dict(result: EpisodeResult) -> dict:
+    """An EpisodeResult as a plain dict (for logs and JSON)."""
+    return asdict(result)

@@ -1,0 +1,138 @@
+"""Trained SB3 models as residual policies: loading, and running them in the diagram.
+
+A policy saved by ``rlfd train`` is a Stable-Baselines3 zip (PPO, SAC, TD3 or
+sb3-contrib's RecurrentPPO). :class:`DeployedPolicy` turns it into the callable the
+diagram's ``ResidualPolicy`` runs at 10 Hz: obs (26,) -> action (6,), keeping the
+observation history of frame-stacked models and the LSTM state of recurrent ones.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+#: Algorithm name -> (module, class) of its SB3 implementation.
+SB3_CLASSES = {
+    "ppo": ("stable_baselines3", "PPO"),
+    "sac": ("stable_baselines3", "SAC"),
+    "td3": ("stable_baselines3", "TD3"),
+    "recurrent_ppo": ("sb3_contrib", "RecurrentPPO"),
+}
+
+
+def _sb3_kind_from_zip(path: Path) -> str | None:
+    """The algorithm of an SB3 zip from its policy class module, or None if unclear."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = json.loads(z.read("data"))
+    except (KeyError, OSError, ValueError, zipfile.BadZipFile):
+        return None
+    module = str(data.get("policy_class", {}).get("__module__", ""))
+    if "recurrent" in module:
+        return "recurrent_ppo"
+    if ".sac." in module:
+        return "sac"
+    if ".td3." in module:
+        return "td3"
+    if module == "stable_baselines3.common.policies":
+        return "ppo"
+    return None
+
+
+def load_sb3_model(spec: str | Path):
+    """Loads a saved SB3 model from ``path`` or ``kind:path`` (kind in SB3_CLASSES).
+
+    Returns:
+        (model, kind). The model is loaded on the CPU.
+
+    Raises:
+        ValueError: no such file, or no SB3 class could load it.
+    """
+    spec = str(spec)
+    kind, _, rest = spec.partition(":")
+    if rest and kind in SB3_CLASSES:
+        path, kinds = Path(rest), [kind]
+    else:
+        path = Path(spec)
+        detected = _sb3_kind_from_zip(path) if path.exists() else None
+        kinds = [detected] if detected else list(SB3_CLASSES)
+    if not path.exists():
+        raise ValueError(f"policy file {str(path)!r} does not exist")
+    import importlib
+
+    errors = []
+    for k in kinds:
+        module_name, class_name = SB3_CLASSES[k]
+        cls = getattr(importlib.import_module(module_name), class_name)
+        try:
+            return cls.load(str(path), device="cpu"), k
+        except Exception as e:  # noqa: BLE001 - any loader error means "not this class"
+            errors.append(f"{class_name}: {type(e).__name__}: {e}")
+    raise ValueError(f"could not load {path} as an SB3 model: " + "; ".join(errors))
+
+
+class DeployedPolicy:
+    """A trained SB3 model as the residual policy inside the diagram: obs (26,) ->
+    action (6,).
+
+    * Frame-stacked models (SAC with history): the last observations are kept exactly
+      as ``VecFrameStack`` does (zeros before the first, newest last).
+    * Recurrent models (RecurrentPPO): the LSTM state is kept between calls.
+    * A model with a 3-D action (translation-only or orientation-only training) is
+      padded with zeros according to ``residual_mode``.
+    * ``reset()`` (called by ResidualPolicy at every initialisation) starts an episode.
+    * ``deterministic=False`` samples from the policy's distribution (seed torch for
+      reproducible samples).
+    """
+
+    def __init__(
+        self,
+        model,
+        residual_mode: str = "full",
+        deterministic: bool = True,
+        observation_size: int = 26,
+    ):
+        stacked = int(model.observation_space.shape[0])
+        if stacked % observation_size:
+            raise ValueError(
+                f"the model's observation size {stacked} is not a multiple of the "
+                f"diagram's observation size {observation_size}"
+            )
+        self.model = model
+        self.history = stacked // observation_size
+        self.observation_size = observation_size
+        self.residual_mode = residual_mode
+        self.deterministic = deterministic
+        self._recurrent = hasattr(model.policy, "lstm_actor")
+        self.reset()
+
+    def reset(self) -> None:
+        """New episode: clears the observation history and the recurrent state."""
+        self._stack = np.zeros(self.history * self.observation_size, dtype=np.float32)
+        self._lstm_state = None
+        self._episode_start = np.ones((1,), dtype=bool)
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observation, dtype=np.float32)
+        self._stack = np.roll(self._stack, -self.observation_size)
+        self._stack[-self.observation_size :] = obs
+        if self._recurrent:
+            action, self._lstm_state = self.model.predict(
+                self._stack[None],
+                state=self._lstm_state,
+                episode_start=self._episode_start,
+                deterministic=self.deterministic,
+            )
+            self._episode_start = np.zeros((1,), dtype=bool)
+        else:
+            action, _ = self.model.predict(self._stack, deterministic=self.deterministic)
+        action = np.asarray(action, dtype=float).reshape(-1)
+        if action.size == 3 and self.residual_mode in ("translation", "orientation"):
+            full = np.zeros(6)
+            full[0:3] = action if self.residual_mode == "translation" else 0.0
+            full[3:6] = action if self.residual_mode == "orientation" else 0.0
+            return full
+        return action

@@ -1,0 +1,189 @@
+"""Episodes: specs, DMP-only success, determinism, failures turned into results."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import rlfd_drake.episode as episode_module
+from rlfd_drake.baselines.random_policy import ZeroPolicy
+from rlfd_drake.episode import (
+    FAILURE_KINDS,
+    EpisodeResult,
+    EpisodeSpec,
+    load_task_dmp,
+    make_episode_specs,
+    run_episode,
+)
+from rlfd_drake.tasks import load_task
+
+
+@pytest.fixture(scope="module")
+def peg_easy():
+    return load_task("peg_easy")
+
+
+@pytest.fixture(scope="module")
+def dmp(peg_easy):
+    return load_task_dmp(peg_easy)
+
+
+@pytest.fixture(scope="module")
+def nominal_result(peg_easy, dmp) -> EpisodeResult:
+    """DMP alone from the demonstration start, no fixture error."""
+    return run_episode(peg_easy, dmp, EpisodeSpec())
+
+
+def _comparable(result: EpisodeResult) -> dict:
+    values = dataclasses.asdict(result)
+    values.pop("wall_time_s")
+    return values
+
+
+def test_load_task_dmp_is_cached(peg_easy, dmp):
+    assert load_task_dmp(peg_easy) is dmp
+    assert dmp.tau == pytest.approx(7.59, abs=0.05)  # the committed demo lasts 7.59 s
+
+
+def test_dmp_alone_inserts_from_the_demo_start(peg_easy, nominal_result):
+    r = nominal_result
+    assert r.success, r
+    assert r.failure_reason is None and r.failure_kind is None
+    # The demonstration inserts at about 6.4 s; the episode stops 0.5 s after success.
+    assert 5.0 < r.insertion_time_s < 7.5
+    assert r.sim_time_s < peg_easy.episode_time_s
+    assert r.sim_time_s == pytest.approx(r.insertion_time_s + 0.5, abs=0.15)
+    assert r.final_distance_m <= peg_easy.kappa_m
+    assert r.final_angle_deg < 1.0
+    assert r.peak_force_n > 1.0  # the peg touched the hole floor
+    assert 0.0 <= r.mean_force_n <= r.peak_force_n
+    assert r.peak_joint_contact_torque_nm > 0.0
+    assert not r.force_limit_broken
+    assert r.bin_index == -1
+
+
+def test_same_spec_same_result(peg_easy, dmp, nominal_result):
+    again = run_episode(peg_easy, dmp, EpisodeSpec())
+    assert _comparable(again) == _comparable(nominal_result)
+
+
+def test_zero_policy_object_equals_dmp_alone(peg_easy, dmp, nominal_result):
+    """The in-diagram policy path with a zero residual reproduces the fixed zero input."""
+    with_policy = run_episode(peg_easy, dmp, EpisodeSpec(), policy=ZeroPolicy())
+    assert with_policy.success
+    assert with_policy.insertion_time_s == nominal_result.insertion_time_s
+    assert with_policy.final_distance_m == pytest.approx(nominal_result.final_distance_m, abs=1e-9)
+
+
+def test_large_fixture_error_fails_on_the_entrance(peg_easy, dmp):
+    # 1 cm off: the 30 mm peg lands on the wall around the 32 mm hole.
+    spec = EpisodeSpec(fixture_dp=(0.01, 0.0, 0.0))
+    task = dataclasses.replace(peg_easy, episode_time_s=7.5)  # the DMP ends at 7.6 s
+    r = run_episode(task, dmp, spec)
+    assert not r.success
+    assert math.isnan(r.insertion_time_s)
+    assert r.failure_kind == "on_entrance", r.failure_reason
+    assert r.failure_kind in FAILURE_KINDS
+    assert r.final_distance_m > 0.03  # resting on top of a 40 mm deep hole
+    assert r.sim_time_s == pytest.approx(7.5)
+    assert r.peak_force_n > 1.0
+
+
+def test_force_limit_stops_and_fails(peg_easy, dmp):
+    # The nominal insertion touches the hole floor with tens of N (peak 68 N).
+    task = dataclasses.replace(peg_easy, force_limit_n=5.0)
+    r = run_episode(task, dmp, EpisodeSpec())
+    assert not r.success and r.force_limit_broken
+    assert r.failure_kind == "force_limit", r.failure_reason
+    assert r.peak_force_n > 5.0
+    assert r.sim_time_s < peg_easy.episode_time_s - 2.0  # stopped at the first touch
+
+
+def test_solver_failure_is_a_failed_episode(peg_easy, dmp, monkeypatch):
+    real_make_simulator = episode_module.MakeSimulator
+
+    class FailingSimulator:
+        def __init__(self, simulator):
+            self._simulator = simulator
+
+        def __getattr__(self, name):
+            return getattr(self._simulator, name)
+
+        def AdvanceTo(self, t: float) -> None:
+            if t > 0.25:
+                raise RuntimeError("SAP solver failed to converge\nmore details")
+            self._simulator.AdvanceTo(t)
+
+    monkeypatch.setattr(
+        episode_module, "MakeSimulator", lambda rlfd: FailingSimulator(real_make_simulator(rlfd))
+    )
+    r = run_episode(peg_easy, dmp, EpisodeSpec())
+    assert not r.success
+    assert r.failure_reason == "solver: SAP solver failed to converge"
+    assert r.sim_time_s == pytest.approx(0.2)
+
+
+def test_unreachable_start_is_an_ik_failure(peg_easy, dmp):
+    r = run_episode(peg_easy, dmp, EpisodeSpec(start_dp=(2.0, 0.0, 0.0)))
+    assert not r.success
+    assert r.failure_kind == "ik", r.failure_reason
+    assert r.sim_time_s == 0.0
+
+
+def test_bad_policy_action_is_a_policy_failure(peg_easy, dmp):
+    r = run_episode(peg_easy, dmp, EpisodeSpec(), policy=lambda obs: np.full(6, np.nan))
+    assert not r.success
+    assert r.failure_kind == "policy", r.failure_reason
+
+
+def test_episode_spec_validates():
+    with pytest.raises(ValueError, match="start_dq must be a unit quaternion"):
+        EpisodeSpec(start_dq=(1.0, 1.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="fixture_dp must be 3 finite numbers"):
+        EpisodeSpec(fixture_dp=(0.0, 0.0))
+    spec = EpisodeSpec(start_dp=np.array([0.03, 0.04, 0.0]))
+    assert spec.start_dp == (0.03, 0.04, 0.0)
+    assert spec.start_position_offset_m == pytest.approx(0.05)
+    assert spec.start_rotation_offset_deg == 0.0
+
+
+def test_make_episode_specs_is_seeded(peg_easy):
+    a = make_episode_specs(peg_easy, 6, seed=3, grid=True)
+    assert a == make_episode_specs(peg_easy, 6, seed=3, grid=True)
+    assert a != make_episode_specs(peg_easy, 6, seed=4, grid=True)
+    assert all(s.bin_index == 0 for s in a)
+    # Fixture errors are independent of the start distribution: same with grid=False.
+    b = make_episode_specs(peg_easy, 6, seed=3, grid=False)
+    assert [s.fixture_dp for s in b] == [s.fixture_dp for s in a]
+    assert all(s.bin_index == -1 for s in b)
+    bound = np.array(peg_easy.fixture_error.position_bound_m)
+    for s in a + b:
+        assert np.all(np.abs(s.start_dp) <= peg_easy.start.half_extent_m)
+        assert np.all(np.abs(s.fixture_dp) <= bound + 1e-12)
+        angle = 2 * math.degrees(math.acos(min(1.0, abs(s.fixture_dq[0]))))
+        assert angle <= peg_easy.fixture_error.rotation_bound_deg + 1e-9
+    with pytest.raises(ValueError, match="n must be positive"):
+        make_episode_specs(peg_easy, 0, seed=0)
+
+
+def test_make_episode_specs_follow_the_orientation_bins():
+    gear = load_task("gear")
+    specs = make_episode_specs(gear, 16, seed=0, grid=True)
+    assert [s.bin_index for s in specs] == [b for b in range(8) for _ in range(2)]
+    width = gear.start.max_angle_deg / gear.start.n_bins
+    for s in specs:
+        assert (
+            s.bin_index * width <= s.start_rotation_offset_deg <= (s.bin_index + 1) * width + 1e-9
+        )
+        assert np.all(np.abs(s.start_dp) <= gear.start.half_extent_m)
+        # The table slope (1 deg) is part of every fixture error.
+        angle = 2 * math.degrees(math.acos(min(1.0, abs(s.fixture_dq[0]))))
+        assert angle <= gear.fixture_error.rotation_bound_deg + 1.0 + 1e-9
+
+
+def test_record_html_needs_meshcat(peg_easy, dmp, tmp_path):
+    with pytest.raises(ValueError, match="record_html needs a meshcat"):
+        run_episode(peg_easy, dmp, EpisodeSpec(), record_html=tmp_path / "episode.html")

@@ -1,0 +1,154 @@
+"""The evaluation harness and the random baseline."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rlfd_drake.baselines.random_policy import RandomResidualPolicy, ZeroPolicy
+from rlfd_drake.evaluate import (
+    RESULT_KEYS,
+    _success_curve,
+    evaluate,
+    make_policy,
+    write_evaluation,
+)
+from rlfd_drake.policies import DeployedPolicy, _sb3_kind_from_zip, load_sb3_model
+from rlfd_drake.systems.observer import OBSERVATION_SIZE
+
+
+@pytest.fixture(scope="module")
+def dmp_result() -> dict:
+    return evaluate("peg_easy", "dmp", episodes=4, seed=0, workers=1, progress=False)
+
+
+def test_evaluate_returns_the_documented_keys(dmp_result):
+    r = dmp_result
+    assert set(RESULT_KEYS) <= set(r)
+    assert r["episodes"] == 4 and r["task"] == "peg_easy" and r["policy"] == "dmp"
+    assert 0.0 <= r["success_rate"] <= 1.0
+    assert r["success_std_kind"].startswith("binomial")  # the uniform box has one bin
+    p = r["success_rate"]
+    assert r["success_std"] == pytest.approx(np.sqrt(p * (1 - p) / 4))
+    assert len(r["per_bin"]) == 1 and r["per_bin"][0]["n"] == 4
+    # Uniform +-12 cm box: the mean offset norm is about 12 cm; no rotation.
+    assert 0.02 < r["per_bin"][0]["position_offset_m"] < 0.21
+    assert r["per_bin"][0]["rotation_offset_deg"] == 0.0
+    n_success = sum(r["episode_table"]["success"])
+    assert sum(r["failures"].values()) == 4 - n_success
+    if n_success:
+        assert 0.0 < r["insertion_time_s"] < 10.0
+    assert r["peak_force_n"] >= r["mean_force_n"] >= 0.0
+    assert r["wall_time_s"] > 0.0
+    json.dumps(r)  # JSON-serialisable as is
+
+
+def test_evaluate_is_the_same_in_worker_processes(dmp_result):
+    """Two spawned workers reproduce the first two episodes of the in-process run."""
+    r = evaluate("peg_easy", "dmp", episodes=2, seed=0, workers=2, progress=False)
+    for key in ("success", "insertion_time_s", "final_distance_mm", "failure"):
+        assert r["episode_table"][key] == dmp_result["episode_table"][key][:2]
+
+
+def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    paths = write_evaluation(dmp_result, "eval_test", command="rlfd evaluate test")
+    record = json.loads(paths["json"].read_text())
+    assert record["command"] == "rlfd evaluate test" and record["seed"] == 0
+    assert record["data"]["success_rate"] == dmp_result["success_rate"]
+    markdown = paths["md"].read_text()
+    assert "| task | policy | success % |" in markdown and "peg_easy" in markdown
+    assert paths["png"].read_bytes()[:4] == b"\x89PNG"
+    assert all(p.stat().st_size < 100_000 for p in paths.values())
+
+
+def test_success_curve_of_binned_results():
+    result = {
+        "per_bin": [
+            {
+                "bin": b,
+                "n": 20,
+                "success_rate": 1.0 - 0.1 * b,
+                "position_offset_m": 0.01,
+                "rotation_offset_deg": 2.5 + 5 * b,
+            }
+            for b in range(8)
+        ]
+    }
+    x, p, std, n, label = _success_curve(result)
+    np.testing.assert_allclose(x, 2.5 + 5 * np.arange(8))
+    np.testing.assert_allclose(p, 1.0 - 0.1 * np.arange(8))
+    np.testing.assert_allclose(std, np.sqrt(p * (1 - p) / 20))
+    assert "rotation" in label and list(n) == [20] * 8
+
+
+def test_random_policy_masks_and_seed():
+    obs = np.zeros(OBSERVATION_SIZE, dtype=np.float32)
+    full = RandomResidualPolicy(seed=5)
+    actions = np.array([full(obs) for _ in range(200)])
+    assert actions.shape == (200, 6)
+    assert np.all(np.abs(actions) <= 1.0) and np.all(np.abs(actions).max(axis=0) > 0.9)
+    assert abs(actions.mean()) < 0.1  # uniform in [-1, 1]
+    again = RandomResidualPolicy(seed=5)
+    np.testing.assert_array_equal(np.array([again(obs) for _ in range(200)]), actions)
+    assert not np.array_equal(RandomResidualPolicy(seed=6)(obs), actions[0])
+
+    translation = np.array([RandomResidualPolicy(1, orientation=False)(obs) for _ in range(50)])
+    assert np.all(translation[:, 3:] == 0.0) and np.all(translation[:, :3] != 0.0)
+    orientation = np.array([RandomResidualPolicy(1, translation=False)(obs) for _ in range(50)])
+    assert np.all(orientation[:, :3] == 0.0) and np.all(orientation[:, 3:] != 0.0)
+    assert np.all(ZeroPolicy()(obs) == 0.0)
+
+
+def test_make_policy_from_spec_strings():
+    assert make_policy("dmp") is None
+    policy = make_policy("random", residual_mode="translation", episode_seed=7)
+    assert isinstance(policy, RandomResidualPolicy)
+    assert policy.translation and not policy.orientation and policy.seed == 7
+    with pytest.raises(ValueError, match="does not exist"):
+        make_policy("/nonexistent/model.zip")
+
+
+class _ResidualEnv(gym.Env):
+    """Spaces of the residual: observation (26,), action (6,) in [-1, 1]."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        return np.zeros(OBSERVATION_SIZE, np.float32), {}
+
+    def step(self, action):
+        return np.zeros(OBSERVATION_SIZE, np.float32), 0.0, True, False, {}
+
+
+@pytest.mark.parametrize(
+    ("module", "name", "kind"),
+    [
+        ("stable_baselines3", "PPO", "ppo"),
+        ("stable_baselines3", "SAC", "sac"),
+        ("sb3_contrib", "RecurrentPPO", "recurrent_ppo"),
+    ],
+)
+def test_saved_sb3_models_become_residual_policies(module, name, kind, tmp_path):
+    import importlib
+
+    cls = getattr(importlib.import_module(module), name)
+    policy_name = "MlpLstmPolicy" if kind == "recurrent_ppo" else "MlpPolicy"
+    model = cls(policy_name, _ResidualEnv(), device="cpu", seed=0)
+    path = tmp_path / f"{kind}.zip"
+    model.save(path)
+    assert _sb3_kind_from_zip(path) == kind
+    loaded, loaded_kind = load_sb3_model(str(path))
+    assert loaded_kind == kind and type(loaded).__name__ == name
+    policy = make_policy(str(path))
+    assert isinstance(policy, DeployedPolicy)
+    obs = np.linspace(-1, 1, OBSERVATION_SIZE).astype(np.float32)
+    policy.reset()
+    first = policy(obs)
+    assert first.shape == (6,) and np.all(np.isfinite(first)) and np.all(np.abs(first) <= 1.0)
+    policy.reset()
+    np.testing.assert_allclose(policy(obs), first)  # deterministic after a reset
