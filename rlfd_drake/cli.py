@@ -65,6 +65,8 @@ def _cmd_demo_record(args: argparse.Namespace) -> int:
     from rlfd_drake.expert import record_demonstration
     from rlfd_drake.tasks import load_task
 
+    if Path(args.out).exists() and not args.overwrite:
+        raise FileExistsError(f"{args.out} exists; pass --overwrite to replace it")
     task = load_task(args.task, check_demo=False)
     demo = record_demonstration(task, seed=args.seed)
     path = save_demonstration(demo, args.out, overwrite=args.overwrite)

@@ -321,7 +321,8 @@ class RlfdEnv(DrakeGymEnv):
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (distance + DENSE_EPS)
         success = distance <= self.task.kappa_m
         limit = self.task.force_limit_n
-        if limit is not None and self._port("force_metrics")[0] > limit:
+        # Force limits apply to the low-passed contact force (see ObserverConfig).
+        if limit is not None and self._port("force_metrics")[3] > limit:
             self._force_limit_broken = True
         terminated = success or self._force_limit_broken
         truncated = (not terminated) and context.get_time() >= self.task.episode_time_s - 1e-9

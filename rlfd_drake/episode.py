@@ -337,7 +337,7 @@ def run_episode(
         while t < t_end - 1e-9:
             t = min(t + chunk_s, t_end)
             simulator.AdvanceTo(t)
-            if task.force_limit_n is not None and force_port.Eval(context)[0] > task.force_limit_n:
+            if task.force_limit_n is not None and force_port.Eval(context)[3] > task.force_limit_n:
                 force_limit_broken = True
                 break
             if latched_at is None and success_port.Eval(context)[0] > 0.5:
@@ -391,12 +391,12 @@ def run_episode(
         return result(failure, False, **metrics)
     if force_limit_broken:
         force_log = rlfd.logs["force_metrics"].FindLog(context)
-        broken = np.flatnonzero(force_log.data()[0] > task.force_limit_n)
+        broken = np.flatnonzero(force_log.data()[3] > task.force_limit_n)
         k = int(broken[0]) if broken.size else -1
         when = (
             f"at t = {force_log.sample_times()[k]:.2f} s, {1e3 * distances[k]:.1f} mm from the goal"
         )
-        reason = f"force_limit: {forces[0]:.1f} N > {task.force_limit_n:g} N {when}"
+        reason = f"force_limit: {forces[3]:.1f} N (low-passed) > {task.force_limit_n:g} N {when}"
         return result(reason, False, **metrics)
     latched = bool(success_port.Eval(context)[0] > 0.5) or reached.size > 0
     if not latched:

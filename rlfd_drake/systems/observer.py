@@ -16,7 +16,7 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 #: Size of the observation vector (see :class:`Observer`).
 OBSERVATION_SIZE = 26
 # Force-metric state layout.
-_PEAK_F, _SUM_F, _COUNT, _PEAK_TAU, _SUCCESS = range(5)
+_PEAK_F, _SUM_F, _COUNT, _PEAK_TAU, _SUCCESS, _FILTERED_F, _PEAK_FILTERED_F = range(7)
 
 
 @dataclass(frozen=True)
@@ -24,6 +24,9 @@ class ObserverConfig:
     """Attributes:
     kappa_m: success radius of the sparse reward, m.
     force_metrics_period_s: update period of the force metrics and success latch, s.
+    force_filter_time_constant_s: time constant of the low-passed contact force that
+        force limits are checked against, s. A 2 ms plant step resolves impact spikes
+        of one sample that a real part (and a real F/T sensor) would not feel as such.
     episode_time_s: episode length used to normalise time, s.
     position_scale_m: position error per unit of observation, m.
     angular_velocity_scale_rad_per_s, linear_velocity_scale_m_per_s: twist scales.
@@ -32,6 +35,7 @@ class ObserverConfig:
 
     kappa_m: float = 0.005
     force_metrics_period_s: float = 0.002
+    force_filter_time_constant_s: float = 0.02
     episode_time_s: float = 10.0
     position_scale_m: float = 0.02
     angular_velocity_scale_rad_per_s: float = 1.0
@@ -84,8 +88,9 @@ class Observer(LeafSystem):
 
     ``reward`` (1): sparse ``1[|p_WP - p_WGoal_true| <= kappa_m]``.
     ``success`` (1): 1 once the reward has been 1 at a force-metric update (latched).
-    ``force_metrics`` (3): [peak contact force (N), time-averaged contact force (N),
-    peak |generalised contact torque| over the arm joints (N m)] since
+    ``force_metrics`` (4): [peak contact force (N), time-averaged contact force (N),
+    peak |generalised contact torque| over the arm joints (N m), peak of the
+    contact force low-passed with ``force_filter_time_constant_s`` (N)] since
     initialisation; the contact force at an instant is the sum over contact
     surfaces/points of |F| (magnitudes, so opposing wall forces do not cancel).
     ``distance_to_goal`` (1): |p_WP - p_WGoal_true|, m.
@@ -138,7 +143,7 @@ class Observer(LeafSystem):
         self._tau_contact = self.DeclareVectorInputPort("generalized_contact_forces", n_arm)
         self._phase = self.DeclareVectorInputPort("phase", 1)
         self._residual = self.DeclareVectorInputPort("residual", 6)
-        self.DeclareDiscreteState(5)
+        self.DeclareDiscreteState(7)
         self.DeclarePeriodicDiscreteUpdateEvent(
             config.force_metrics_period_s, 0.0, self._update_metrics
         )
@@ -148,7 +153,7 @@ class Observer(LeafSystem):
             "success", 1, self._calc_success, prerequisites_of_calc={self.all_state_ticket()}
         )
         self.DeclareVectorOutputPort(
-            "force_metrics", 3, self._calc_force_metrics, {self.all_state_ticket()}
+            "force_metrics", 4, self._calc_force_metrics, {self.all_state_ticket()}
         )
         self.DeclareVectorOutputPort("distance_to_goal", 1, self._calc_distance)
 
@@ -184,6 +189,10 @@ class Observer(LeafSystem):
         new[_COUNT] = x[_COUNT] + 1.0
         new[_PEAK_TAU] = max(x[_PEAK_TAU], tau)
         new[_SUCCESS] = 1.0 if (reached or x[_SUCCESS] > 0.5) else 0.0
+        dt = self.config.force_metrics_period_s
+        gain = dt / (self.config.force_filter_time_constant_s + dt)
+        new[_FILTERED_F] = x[_FILTERED_F] + gain * (force - x[_FILTERED_F])
+        new[_PEAK_FILTERED_F] = max(x[_PEAK_FILTERED_F], new[_FILTERED_F])
 
     # -- outputs --------------------------------------------------------------------
     def _calc_observation(self, context: Context, output: BasicVector) -> None:
@@ -216,7 +225,7 @@ class Observer(LeafSystem):
     def _calc_force_metrics(self, context: Context, output: BasicVector) -> None:
         x = context.get_discrete_state(0).get_value()
         mean = x[_SUM_F] / x[_COUNT] if x[_COUNT] > 0 else 0.0
-        output.SetFromVector([x[_PEAK_F], mean, x[_PEAK_TAU]])
+        output.SetFromVector([x[_PEAK_F], mean, x[_PEAK_TAU], x[_PEAK_FILTERED_F]])
 
     def _calc_distance(self, context: Context, output: BasicVector) -> None:
         output.SetAtIndex(0, self.DistanceToGoal(context))

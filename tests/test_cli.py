@@ -1,0 +1,45 @@
+"""The `rlfd` command: listing, fitting, and clear errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rlfd_drake.cli import main
+from rlfd_drake.paths import model_path
+
+
+def test_tasks_json_lists_every_task(capsys):
+    assert main(["tasks", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert set(rows) == {"peg_easy", "peg_hard", "peg", "gear", "rj45"}
+
+
+def test_fit_writes_parameters_and_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "dmp.npz"
+    demo = str(model_path("demos/peg.csv"))
+    assert main(["fit", "--demo", demo, "--out", str(out)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["position_rmse_mm"] < 1.0 and report["orientation_rmse_deg"] < 0.5
+    assert out.exists()
+    assert main(["fit", "--demo", demo, "--out", str(out)]) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
+
+
+def test_bad_input_is_a_one_line_error(tmp_path, capsys):
+    assert (
+        main(["fit", "--demo", str(tmp_path / "none.csv"), "--out", str(tmp_path / "x.npz")]) == 2
+    )
+    assert "rlfd: error" in capsys.readouterr().err
+    assert main(["train", "--task", "peg_huge", "--episodes", "1"]) == 2
+    assert "task must be one of" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "dqn"])
+
+
+def test_demo_record_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "demo.csv"
+    out.write_text("precious\n")
+    assert main(["demo", "record", "--task", "peg_easy", "--out", str(out)]) == 2
+    assert out.read_text() == "precious\n"
