@@ -25,7 +25,6 @@ import numpy as np
 from pydrake.gym import DrakeGymEnv
 from pydrake.systems.analysis import Simulator
 
-from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import (
     RESIDUAL_SIZE,
     BuildRlfdDiagram,
@@ -35,7 +34,7 @@ from rlfd_drake.diagram import (
     RlfdDiagramConfig,
     SetEpisodeStart,
 )
-from rlfd_drake.dmp import fit_cartesian_dmp
+from rlfd_drake.episode import demo_start_pose, load_task_dmp
 from rlfd_drake.scene import FixtureErrorTransform
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
 from rlfd_drake.tasks import TaskSpec, load_task, sample_fixture_error, sample_start_offset
@@ -167,11 +166,8 @@ class RlfdEnv(DrakeGymEnv):
         self.diagram_config = RlfdDiagramConfig(
             **{**config.__dict__, "residual_mode": residual_mode, "log_period_s": None}
         )
-        demo = load_demonstration(self.task.demo_path())
-        self.dmp_model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)
-        self._X_WP_demo_start = PoseFromOffset(
-            _pose_from_vector(demo.positions[0], demo.quats[0]), np.zeros(3), np.eye(4)[0]
-        )
+        self.dmp_model = load_task_dmp(self.task)
+        self._X_WP_demo_start = demo_start_pose(self.dmp_model)
         self._X_WGoal_nominal = NominalGoal(self.task)
         self._meshcat = None
         # DrakeGymEnv writes "ascii" into self.metadata: give it an instance copy so the
@@ -349,14 +345,6 @@ class RlfdEnv(DrakeGymEnv):
             self.simulator.get_system().ForcedPublish(self.simulator.get_context())
             return None
         return None
-
-
-def _pose_from_vector(position: np.ndarray, quat_wxyz: np.ndarray):
-    from pydrake.common.eigen_geometry import Quaternion
-    from pydrake.math import RigidTransform, RotationMatrix
-
-    q = np.asarray(quat_wxyz, float)
-    return RigidTransform(RotationMatrix(Quaternion(q / np.linalg.norm(q))), position)
 
 
 def register_envs() -> None:

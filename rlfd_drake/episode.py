@@ -87,7 +87,7 @@ def load_task_dmp(task: TaskSpec, config: DmpConfig | None = None) -> CartesianD
     return model
 
 
-def _demo_start_pose(dmp_model: CartesianDmp) -> RigidTransform:
+def demo_start_pose(dmp_model: CartesianDmp) -> RigidTransform:
     """X_WP of the demonstration's first sample (the DMP's y0, q0)."""
     q = quat_normalize(np.asarray(dmp_model.q0, dtype=float))
     return RigidTransform(RotationMatrix(Quaternion(q)), np.asarray(dmp_model.y0, dtype=float))
@@ -314,7 +314,7 @@ def run_episode(
         )
 
     X_WP_start = PoseFromOffset(
-        _demo_start_pose(dmp_model), np.asarray(spec.start_dp), spec.start_dq
+        demo_start_pose(dmp_model), np.asarray(spec.start_dp), spec.start_dq
     )
     try:
         SetEpisodeStart(rlfd, context, X_WP_start)

@@ -15,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.math import RigidTransform
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
@@ -29,6 +30,7 @@ from rlfd_drake.geometry import (
     quat_from_rotation_vector,
     quat_log,
     quat_multiply,
+    quat_normalize,
     quat_slerp,
 )
 from rlfd_drake.scene import AddRlfdScene, SceneConfig, SolvePandaIK
@@ -181,7 +183,7 @@ def record_demonstration(
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
-    X_WP0 = RigidTransform(quat_to_drake_rotation(quats[0]), positions[0])
+    X_WP0 = RigidTransform(RotationMatrix(Quaternion(quat_normalize(quats[0]))), positions[0])
     plant.SetPositions(plant_context, scene.panda, SolvePandaIK(scene, X_WP0))
     simulator.Initialize()
     simulator.AdvanceTo(times[-1])
@@ -205,12 +207,3 @@ def record_demonstration(
             f"(final distance {miss:.4f} m > kappa {task.kappa_m} m); try another seed"
         )
     return demo
-
-
-def quat_to_drake_rotation(q_wxyz: np.ndarray):
-    """pydrake RotationMatrix of a wxyz quaternion."""
-    from pydrake.common.eigen_geometry import Quaternion
-    from pydrake.math import RotationMatrix
-
-    q = np.asarray(q_wxyz, float)
-    return RotationMatrix(Quaternion(q / np.linalg.norm(q)))
