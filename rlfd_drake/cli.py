@@ -203,8 +203,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         workers=args.workers,
         grid=not args.random_starts,
         residual_mode=args.residual_mode,
+        deterministic=not args.stochastic,
     )
-    name = args.name or f"eval_{args.task}_{Path(args.policy).stem}_s{args.seed}"
+    mode = "_stochastic" if args.stochastic else ""
+    name = args.name or f"eval_{args.task}_{Path(args.policy).stem}{mode}_s{args.seed}"
     paths = write_evaluation(result, name)
     if args.json:
         _print_json(result)
@@ -287,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument(
         "--random-starts", action="store_true", help="sample starts instead of the grid"
+    )
+    evaluate.add_argument(
+        "--stochastic", action="store_true", help="sample the policy's actions (seeded)"
     )
     evaluate.add_argument("--name", help="results file stem")
     evaluate.add_argument("--json", action="store_true", help="print the JSON result")

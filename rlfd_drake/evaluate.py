@@ -68,7 +68,12 @@ RESULT_KEYS = (
 _MODEL_CACHE: dict[str, tuple[object, str]] = {}
 
 
-def make_policy(policy_spec: str, residual_mode: str = "full", episode_seed: int = 0):
+def make_policy(
+    policy_spec: str,
+    residual_mode: str = "full",
+    episode_seed: int = 0,
+    deterministic: bool = True,
+):
     """The residual policy of ``policy_spec`` for one episode (None for "dmp").
 
     ``episode_seed`` seeds the random baseline; a saved model is loaded once per
@@ -93,7 +98,7 @@ def make_policy(policy_spec: str, residual_mode: str = "full", episode_seed: int
             pass
         _MODEL_CACHE[policy_spec] = load_sb3_model(policy_spec)
     model, kind = _MODEL_CACHE[policy_spec]
-    return DeployedPolicy(model, residual_mode)
+    return DeployedPolicy(model, residual_mode, deterministic=deterministic, seed=episode_seed)
 
 
 # --------------------------------------------------------------------------------------
@@ -103,7 +108,11 @@ _WORKER: dict[str, object] = {}
 
 
 def _init_worker(
-    task_name: str, policy_spec: str, residual_mode: str, config: RlfdDiagramConfig
+    task_name: str,
+    policy_spec: str,
+    residual_mode: str,
+    config: RlfdDiagramConfig,
+    deterministic: bool = True,
 ) -> None:
     task = load_task(task_name)
     _WORKER.update(
@@ -112,6 +121,7 @@ def _init_worker(
         policy_spec=policy_spec,
         residual_mode=residual_mode,
         config=config,
+        deterministic=deterministic,
     )
     if policy_spec not in ("dmp", "random"):
         make_policy(policy_spec, residual_mode)  # load the model once, fail early
@@ -119,7 +129,9 @@ def _init_worker(
 
 def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
     index, episode_seed, spec = job
-    policy = make_policy(_WORKER["policy_spec"], _WORKER["residual_mode"], episode_seed)
+    policy = make_policy(
+        _WORKER["policy_spec"], _WORKER["residual_mode"], episode_seed, _WORKER["deterministic"]
+    )
     result = run_episode(
         _WORKER["task"], _WORKER["dmp"], spec, policy=policy, diagram_config=_WORKER["config"]
     )
@@ -213,6 +225,7 @@ def evaluate(
     residual_mode: str = "full",
     diagram_config: RlfdDiagramConfig | None = None,
     progress: bool = True,
+    deterministic: bool = True,
 ) -> dict:
     """Evaluates a policy on ``episodes`` starts of a task.
 
@@ -227,6 +240,8 @@ def evaluate(
         diagram_config: rates and gains (default RlfdDiagramConfig()); its
             residual_mode is replaced by ``residual_mode``.
         progress: show a tqdm progress bar.
+        deterministic: a trained policy acts with its mean (True) or samples from its
+            Gaussian, seeded per episode (False).
 
     Returns:
         A JSON-serialisable dict with :data:`RESULT_KEYS`: ``success_rate`` (0..1),
@@ -252,7 +267,7 @@ def evaluate(
     specs = make_episode_specs(task, episodes, seed, grid)
     episode_seeds = np.random.SeedSequence([seed, 1]).generate_state(episodes).tolist()
     jobs = [(i, int(episode_seeds[i]), spec) for i, spec in enumerate(specs)]
-    init_args = (task_name, policy_spec, residual_mode, config)
+    init_args = (task_name, policy_spec, residual_mode, config, deterministic)
 
     from tqdm.auto import tqdm
 
@@ -286,6 +301,7 @@ def evaluate(
         "task": task.name,
         "policy": policy_spec,
         "residual_mode": residual_mode,
+        "deterministic": deterministic,
         "seed": seed,
         "grid": grid,
         "episodes": episodes,

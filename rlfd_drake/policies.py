@@ -84,8 +84,8 @@ class DeployedPolicy:
     * A model with a 3-D action (translation-only or orientation-only training) is
       padded with zeros according to ``residual_mode``.
     * ``reset()`` (called by ResidualPolicy at every initialisation) starts an episode.
-    * ``deterministic=False`` samples from the policy's distribution (seed torch for
-      reproducible samples).
+    * ``deterministic=False`` samples from the policy's distribution; ``reset()`` then
+      seeds torch with ``seed`` so the episode is reproducible.
     """
 
     def __init__(
@@ -94,6 +94,7 @@ class DeployedPolicy:
         residual_mode: str = "full",
         deterministic: bool = True,
         observation_size: int = 26,
+        seed: int = 0,
     ):
         stacked = int(model.observation_space.shape[0])
         if stacked % observation_size:
@@ -106,6 +107,7 @@ class DeployedPolicy:
         self.observation_size = observation_size
         self.residual_mode = residual_mode
         self.deterministic = deterministic
+        self.seed = int(seed)
         self._recurrent = hasattr(model.policy, "lstm_actor")
         self.reset()
 
@@ -114,6 +116,12 @@ class DeployedPolicy:
         self._stack = np.zeros(self.history * self.observation_size, dtype=np.float32)
         self._lstm_state = None
         self._episode_start = np.ones((1,), dtype=bool)
+        if not self.deterministic:
+            # SB3 samples with torch's global generator: seed it per episode so a
+            # stochastic evaluation is reproducible.
+            import torch
+
+            torch.manual_seed(self.seed)
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         obs = np.asarray(observation, dtype=np.float32)
