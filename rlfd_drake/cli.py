@@ -41,7 +41,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
         data = sim.run(repeats=args.repeats)
         if args.study:
-            data = {"tasks": data, "time_step_study": sim.time_step_study()}
+            study = sim.time_step_study()
+            print(f"wrote {write_result('bench_sim_time_step_study', study)}")
     elif args.what == "dmp":
         from rlfd_drake.bench import dmp
 
@@ -215,7 +216,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             f"{args.task} {args.policy}: success {100 * result['success_rate']:.1f}% "
             f"+- {100 * result['success_std']:.1f} over {result['episodes']} episodes"
         )
-        for path in paths:
+        for path in paths.values():
             print(f"wrote {path}")
     return 0
 
@@ -235,7 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print the JSON result")
     bench.add_argument("--repeats", type=int, default=5, help="runs per figure (median)")
     bench.add_argument(
-        "--study", action="store_true", help="sim only: add the time-step stability study"
+        "--study",
+        action="store_true",
+        help="sim only: also the time-step stability study (its own results file)",
     )
     bench.set_defaults(func=_cmd_bench)
 

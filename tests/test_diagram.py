@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pydrake.common.eigen_geometry import AngleAxis, Quaternion
-from pydrake.math import RigidTransform
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
@@ -22,7 +21,7 @@ from rlfd_drake.diagram import (
     SetEpisodeStart,
 )
 from rlfd_drake.dmp import fit_cartesian_dmp
-from rlfd_drake.expert import quat_to_drake_rotation
+from rlfd_drake.episode import demo_start_pose
 from rlfd_drake.panda import PANDA_TORQUE_LIMITS_NM
 from rlfd_drake.tasks import load_task
 
@@ -40,7 +39,7 @@ def peg():
     task = load_task("peg")
     demo = load_demonstration(task.demo_path())
     model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)
-    X_WP_start = RigidTransform(quat_to_drake_rotation(demo.quats[0]), demo.positions[0])
+    X_WP_start = demo_start_pose(model)
     return task, model, X_WP_start
 
 

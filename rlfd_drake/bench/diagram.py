@@ -39,7 +39,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import BuildRlfdDiagram, RlfdDiagram, SetEpisodeStart
 from rlfd_drake.dmp import fit_cartesian_dmp
-from rlfd_drake.expert import quat_to_drake_rotation
+from rlfd_drake.episode import demo_start_pose
 from rlfd_drake.scene import AddRlfdScene
 from rlfd_drake.tasks import TaskSpec, list_tasks, load_task
 
@@ -83,7 +83,7 @@ def _build(task: TaskSpec) -> tuple[RlfdDiagram, RigidTransform]:
     demo = load_demonstration(task.demo_path())
     model = fit_cartesian_dmp(demo.times, demo.positions, demo.quats)
     rlfd = BuildRlfdDiagram(task, model)
-    X_WP_start = RigidTransform(quat_to_drake_rotation(demo.quats[0]), demo.positions[0])
+    X_WP_start = demo_start_pose(model)
     return rlfd, X_WP_start
 
 
