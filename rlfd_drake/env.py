@@ -102,7 +102,8 @@ class RlfdEnv(DrakeGymEnv):
 
     ## Rewards
     ``reward="sparse"`` (default, the paper's): ``1[L2 <= kappa]`` with L2 the distance
-    of the part frame to its fully inserted pose. ``reward="dense"`` (pure-RL baseline):
+    of the part frame to its fully inserted pose (and, for tasks with ``kappa_deg``
+    such as RJ-45, its orientation within ``kappa_deg``). ``reward="dense"`` (pure-RL baseline):
     ``-alpha L1 + beta / (L2 + eps)`` with alpha=10, beta=0.002, eps=1e-4; the paper
     prints ``-(alpha L1 + beta/(L2 - eps))``, which would penalise getting close; we
     read it as a sign typo and say so.
@@ -251,6 +252,7 @@ class RlfdEnv(DrakeGymEnv):
         X_WP_start = PoseFromOffset(self._X_WP_demo_start, self.setup.start_dp, self.setup.start_dq)
         self._failure_reason = None
         self._force_limit_broken = False
+        self._succeeded = False
         try:
             SetEpisodeStart(self.rlfd, context, X_WP_start)
         except RuntimeError as error:
@@ -264,6 +266,7 @@ class RlfdEnv(DrakeGymEnv):
         except RuntimeError as error:
             self._failure_reason = f"solver: {error.args[0] if error.args else error}"
         observation = self._observe()
+        self._succeeded = self._failure_reason is None and self._inserted()
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
@@ -277,7 +280,7 @@ class RlfdEnv(DrakeGymEnv):
     def _info(self) -> dict[str, Any]:
         forces = self._port("force_metrics")
         info = {
-            "success": bool(self._port("success")[0] > 0.5),
+            "success": self._succeeded,
             "distance_to_goal_m": float(self._port("distance_to_goal")[0]),
             "peak_force_n": float(forces[0]),
             "mean_force_n": float(forces[1]),
@@ -309,13 +312,14 @@ class RlfdEnv(DrakeGymEnv):
             self._failure_reason = f"solver: {error.args[0] if error.args else error}"
             return self._last_observation, 0.0, False, True, self._info()
         observation = self._observe()
-        distance = float(self._port("distance_to_goal")[0])
+        success = self._inserted()
+        self._succeeded = self._succeeded or success
         if self.reward_kind == "sparse":
-            reward = float(self._port("reward")[0])
+            reward = 1.0 if success else 0.0
         else:
-            l1 = float(np.sum(np.abs(self._port_position_error())))
-            reward = -DENSE_ALPHA * l1 + DENSE_BETA / (distance + DENSE_EPS)
-        success = distance <= self.task.kappa_m
+            error, _ = self._part_error()
+            l1 = float(np.sum(np.abs(error)))
+            reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
         limit = self.task.force_limit_n
         # Force limits apply to the low-passed contact force (see ObserverConfig).
         if limit is not None and self._port("force_metrics")[3] > limit:
@@ -324,12 +328,22 @@ class RlfdEnv(DrakeGymEnv):
         truncated = (not terminated) and context.get_time() >= self.task.episode_time_s - 1e-9
         return observation, reward, terminated, truncated, self._info()
 
-    def _port_position_error(self) -> np.ndarray:
-        """p_WP - p_WGoal_true, m (for the dense reward's L1)."""
+    def _part_error(self) -> tuple[np.ndarray, float]:
+        """(p_WP - p_WGoal_true (3,) m, angle between R_WP and R_WGoal_true in deg)."""
         plant = self.rlfd.scene.plant
         plant_context = plant.GetMyContextFromRoot(self.simulator.get_context())
-        p_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context).translation()
-        return p_WP - self.rlfd.scene.X_WGoal.translation()
+        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context)
+        X_WGoal = self.rlfd.scene.X_WGoal
+        angle = X_WGoal.rotation().InvertAndCompose(X_WP.rotation()).ToAngleAxis().angle()
+        return X_WP.translation() - X_WGoal.translation(), float(np.degrees(angle))
+
+    def _inserted(self) -> bool:
+        """Within kappa of the goal, and within kappa_deg of its orientation when the
+        task asks for it (RJ-45: a plug upside down is not inserted)."""
+        error, angle_deg = self._part_error()
+        if float(np.linalg.norm(error)) > self.task.kappa_m:
+            return False
+        return self.task.kappa_deg is None or angle_deg <= self.task.kappa_deg
 
     def render(self):
         if self.render_mode == "ansi":

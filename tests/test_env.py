@@ -159,3 +159,27 @@ def test_pickles_and_runs_in_subproc_vec_env():
         assert obs.shape == (2, 26) and len(infos) == 2
     finally:
         venv.close()
+
+
+def test_success_needs_orientation_when_the_task_says_so(monkeypatch):
+    env = RlfdEnv("rj45", diagram_config=FAST)
+    assert env.task.kappa_deg is not None
+    monkeypatch.setattr(env, "_part_error", lambda: (np.zeros(3), env.task.kappa_deg + 1.0))
+    assert not env._inserted()
+    monkeypatch.setattr(env, "_part_error", lambda: (np.zeros(3), 0.5 * env.task.kappa_deg))
+    assert env._inserted()
+    monkeypatch.setattr(env, "_part_error", lambda: (np.full(3, env.task.kappa_m), 0.0))
+    assert not env._inserted()  # |(k, k, k)| > k
+
+
+def test_sparse_reward_is_one_exactly_on_the_successful_step():
+    env = make_env()
+    env.reset(seed=0, options={"start_dp": np.zeros(3), "fixture_dp": np.zeros(3)})
+    rewards = []
+    done = False
+    while not done:
+        _, reward, terminated, truncated, info = env.step(np.zeros(6, np.float32))
+        rewards.append(reward)
+        done = terminated or truncated
+    assert terminated and info["success"]
+    assert rewards[-1] == 1.0 and set(rewards[:-1]) <= {0.0}
