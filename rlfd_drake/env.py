@@ -35,6 +35,7 @@ from rlfd_drake.diagram import (
     SetEpisodeStart,
 )
 from rlfd_drake.episode import demo_start_pose, load_task_dmp
+from rlfd_drake.geometry import quat_from_rotation_vector, rotation_vector_from_quat
 from rlfd_drake.scene import FixtureErrorTransform
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
 from rlfd_drake.tasks import TaskSpec, load_task, sample_fixture_error, sample_start_offset
@@ -234,10 +235,8 @@ class RlfdEnv(DrakeGymEnv):
         rng = self.np_random
         dp, dq = sample_start_offset(self.task, rng)
         dp = dp * self.perturbation_scale
-        # Scale the rotation angle too: q = [cos(a/2), u sin(a/2)] -> angle * scale.
-        angle = 2.0 * np.arctan2(np.linalg.norm(dq[1:]), dq[0]) * self.perturbation_scale
-        axis = dq[1:] / max(np.linalg.norm(dq[1:]), 1e-12)
-        dq = np.concatenate([[np.cos(angle / 2)], axis * np.sin(angle / 2)])
+        # Scale the rotation angle too, about the same axis.
+        dq = quat_from_rotation_vector(rotation_vector_from_quat(dq) * self.perturbation_scale)
         fixture_dp, fixture_dq = sample_fixture_error(self.task, rng)
         self.setup = EpisodeSetup(
             start_dp=_vector_option(options, "start_dp", 3, dp),
