@@ -139,6 +139,69 @@ def so3_left_jacobian_apply(r: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.array([ux + a * cx + b * dx, uy + a * cy + b * dy, uz + a * cz + b * dz])
 
 
+def rotation_vector_between(q: np.ndarray, q_ref: np.ndarray) -> tuple[float, float, float]:
+    """Rotation vector (rad, world) of ``q o conj(q_ref)``, shortest (angle <= pi).
+
+    Scalar maths on two wxyz quaternions (need not be unit: both are normalised), for
+    the 500 Hz loops where numpy's per-call overhead dominates on 4-vectors.
+    """
+    aw, ax, ay, az = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+    bw, bx, by, bz = float(q_ref[0]), -float(q_ref[1]), -float(q_ref[2]), -float(q_ref[3])
+    inv_norm = 1.0 / math.sqrt(
+        (aw * aw + ax * ax + ay * ay + az * az) * (bw * bw + bx * bx + by * by + bz * bz)
+    )
+    w = (aw * bw - ax * bx - ay * by - az * bz) * inv_norm
+    x = (aw * bx + ax * bw + ay * bz - az * by) * inv_norm
+    y = (aw * by - ax * bz + ay * bw + az * bx) * inv_norm
+    z = (aw * bz + ax * by - ay * bx + az * bw) * inv_norm
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    sin_half = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * math.atan2(sin_half, w) / sin_half if sin_half > 1e-12 else 2.0
+    return scale * x, scale * y, scale * z
+
+
+def quat_multiply_scalar(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float, float]:
+    """``a o b`` of two wxyz quaternions with scalar maths (hot loops; see
+    :func:`rlfd_drake.geometry.quat_multiply` for arrays)."""
+    aw, ax, ay, az = float(a[0]), float(a[1]), float(a[2]), float(a[3])
+    bw, bx, by, bz = float(b[0]), float(b[1]), float(b[2]), float(b[3])
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quat_exp_rotation_vector(rx: float, ry: float, rz: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (wxyz) of the rotation vector r (rad): ``[cos(t/2), r/t sin(t/2)]``."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-12:
+        return 1.0, 0.5 * rx, 0.5 * ry, 0.5 * rz  # first order: unit to machine precision
+    s = math.sin(0.5 * angle) / angle
+    return math.cos(0.5 * angle), s * rx, s * ry, s * rz
+
+
+def so3_left_jacobian_inverse_apply(r: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``J_l^-1(r) @ w`` (3,) without forming the matrix (scalar maths, for hot loops).
+
+    ``J_l^-1(r) w = w - (r x w)/2 + c (r x (r x w))`` with
+    ``c = 1/t^2 - (1 + cos t) / (2 t sin t)``, ``t = |r|`` (series ``1/12`` near 0).
+    """
+    rx, ry, rz = float(r[0]), float(r[1]), float(r[2])
+    wx, wy, wz = float(w[0]), float(w[1]), float(w[2])
+    theta2 = rx * rx + ry * ry + rz * rz
+    if theta2 < 1e-10:
+        c = 1.0 / 12.0
+    else:
+        theta = math.sqrt(theta2)
+        c = 1.0 / theta2 - (1.0 + math.cos(theta)) / (2.0 * theta * math.sin(theta))
+    cx, cy, cz = ry * wz - rz * wy, rz * wx - rx * wz, rx * wy - ry * wx
+    dx, dy, dz = ry * cz - rz * cy, rz * cx - rx * cz, rx * cy - ry * cx
+    return np.array([wx - 0.5 * cx + c * dx, wy - 0.5 * cy + c * dy, wz - 0.5 * cz + c * dz])
+
+
 def so3_left_jacobian_inverse(r: np.ndarray) -> np.ndarray:
     """(3, 3) inverse of :func:`so3_left_jacobian`: ``dr/dt = J_l^-1(r) w``.
 

@@ -5,10 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.common.eigen_geometry import AngleAxis, Quaternion
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-from rlfd_drake.control_math import RESIDUAL_MODES, scale_residual
+from rlfd_drake.control_math import (
+    RESIDUAL_MODES,
+    quat_exp_rotation_vector,
+    quat_multiply_scalar,
+    scale_residual,
+)
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,11 @@ class ResidualComposer(LeafSystem):
         if config.max_translation_m < 0.0 or config.max_rotation_rad < 0.0:
             raise ValueError("max_translation_m and max_rotation_rad must be >= 0")
         self.config = config
+        self._cached_key: bytes | None = None
+        self._cached_correction: tuple[np.ndarray, tuple[float, ...]] = (
+            np.zeros(3),
+            (1.0, 0, 0, 0),
+        )
         self._X_port = self.DeclareVectorInputPort("X_WE_base", 7)
         self._V_port = self.DeclareVectorInputPort("V_WE_base", 6)
         self._residual_port = self.DeclareVectorInputPort("residual", 6)
@@ -85,25 +94,38 @@ class ResidualComposer(LeafSystem):
 
     def Compose(self, X_WE_base: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """(7,) final pose for a base pose (7,) and an active residual action (6,)."""
-        if not np.all(np.isfinite(residual)):
-            raise RuntimeError(f"ResidualComposer: non-finite value on port 'residual': {residual}")
-        dp, rotvec = scale_residual(
-            residual, self.config.max_translation_m, self.config.max_rotation_rad, self.config.mode
-        )
-        X = X_WE_base.copy()
-        X[:3] += dp
-        alpha = float(np.sqrt(rotvec @ rotvec))
-        if alpha > 0.0:
-            Q_delta = AngleAxis(alpha, rotvec / alpha).quaternion()
-            X[3:] = Q_delta.multiply(Quaternion(X_WE_base[3:])).wxyz()
+        dp, Q_delta = self._correction(residual)
+        X = np.empty(7)
+        X[:3] = X_WE_base[:3] + dp
+        X[3:] = quat_multiply_scalar(Q_delta, X_WE_base[3:])
         return X
+
+    def _correction(self, residual: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
+        """(dp (3,) m, Q_delta wxyz) of a residual action. The residual is held for many
+        controller ticks (10 Hz against 500 Hz), so the last one is cached."""
+        key = residual.tobytes()
+        if key != self._cached_key:
+            if not np.all(np.isfinite(residual)):
+                raise RuntimeError(
+                    f"ResidualComposer: non-finite value on port 'residual': {residual}"
+                )
+            dp, rotvec = scale_residual(
+                residual,
+                self.config.max_translation_m,
+                self.config.max_rotation_rad,
+                self.config.mode,
+            )
+            self._cached_key = key
+            self._cached_correction = (dp, quat_exp_rotation_vector(*rotvec))
+        return self._cached_correction
 
     def _calc_X(self, context: Context, output: BasicVector) -> None:
         X_base = self._X_port.Eval(context)
         if self.config.mode == "off" or context.get_time() < self.config.activation_time_s:
             output.SetFromVector(X_base)
             return
-        output.SetFromVector(self.Compose(X_base, self._residual_port.Eval(context)))
+        out = output.get_mutable_value()
+        out[:] = self.Compose(X_base, self._residual_port.Eval(context))
 
     def _calc_V(self, context: Context, output: BasicVector) -> None:
         output.SetFromVector(self._V_port.Eval(context))

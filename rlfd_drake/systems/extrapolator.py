@@ -18,19 +18,19 @@ quaternion.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.common.eigen_geometry import AngleAxis, Quaternion
 from pydrake.systems.framework import BasicVector, Context, DiscreteValues, LeafSystem
 
 from rlfd_drake.control_math import (
     hermite_matrix,
+    quat_exp_rotation_vector,
+    quat_multiply_scalar,
+    rotation_vector_between,
     so3_left_jacobian_apply,
-    so3_left_jacobian_inverse,
+    so3_left_jacobian_inverse_apply,
 )
-from rlfd_drake.geometry import quat_conjugate, quat_multiply, rotation_vector_from_quat
 
 _MAX_SAMPLES = 3
 _SAMPLE_SIZE = 13  # p (3), Q (4), w (3), v (3)
@@ -147,14 +147,15 @@ class QuinticExtrapolator(LeafSystem):
         """(6, 6) coefficients (rows: powers of scaled time, columns: [p, r])."""
         n = samples.shape[0]
         Q_ref = samples[-1, 3:7]
-        r = rotation_vector_from_quat(quat_multiply(samples[:, 3:7], quat_conjugate(Q_ref)))
-        values = np.hstack([samples[:, :3], r])
-        rates = np.empty((n, 6))
-        rates[:, :3] = samples[:, 10:13]
+        conditions = np.empty((2 * n, 6))  # values then h * rates, one row per sample
         for j in range(n):
-            rates[j, 3:] = so3_left_jacobian_inverse(r[j]) @ samples[j, 7:10]
+            r = rotation_vector_between(samples[j, 3:7], Q_ref)
+            conditions[j, :3] = samples[j, :3]
+            conditions[j, 3:] = r
+            conditions[n + j, :3] = self._h * samples[j, 10:13]
+            conditions[n + j, 3:] = self._h * so3_left_jacobian_inverse_apply(r, samples[j, 7:10])
         C = np.zeros((2 * _MAX_SAMPLES, 6))
-        C[: 2 * n] = self._A_inv[n] @ np.vstack([values, self._h * rates])
+        C[: 2 * n] = self._A_inv[n] @ conditions
         return C
 
     # -- outputs --------------------------------------------------------------------
@@ -180,15 +181,9 @@ class QuinticExtrapolator(LeafSystem):
             output.SetFromVector(self._X_port.Eval(context))
             return
         value = self._evaluate(x, context.get_time())[0]
-        r = value[3:]
-        angle = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         out = output.get_mutable_value()
         out[:3] = value[:3]
-        if angle == 0.0:
-            out[3:] = x[_Q_REF]
-        else:
-            dQ = AngleAxis(angle, r / angle).quaternion()
-            out[3:] = dQ.multiply(Quaternion(x[_Q_REF])).wxyz()
+        out[3:] = quat_multiply_scalar(quat_exp_rotation_vector(*value[3:]), x[_Q_REF])
 
     def _calc_V(self, context: Context, output: BasicVector) -> None:
         x = context.get_discrete_state(0).get_value()

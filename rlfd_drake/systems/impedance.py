@@ -24,7 +24,6 @@ The controller never sees the fixture: it owns a separate MultibodyPlant
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,7 +38,11 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from rlfd_drake.control_math import critical_damping, operational_space_inertia
+from rlfd_drake.control_math import (
+    critical_damping,
+    operational_space_inertia,
+    rotation_vector_between,
+)
 from rlfd_drake.panda import PANDA_HAND_BODY, PANDA_HOME_Q, PANDA_TORQUE_LIMITS_NM, AddPanda
 
 #: Name of the controlled frame E in the control model.
@@ -174,6 +177,7 @@ class CartesianImpedanceController(LeafSystem):
         self._kp_null = float(config.nullspace_stiffness_Nm_per_rad)
         self._kd_null = float(config.nullspace_damping_Nms_per_rad)
         self._zero3 = np.zeros(3)
+        self._error = np.zeros(6)  # scratch: [rotation vector; position error]
         # Damping from Lambda at the nominal posture.
         control_plant.SetPositions(self._plant_context, self._q_nominal)
         self._D = self._damping()
@@ -212,39 +216,18 @@ class CartesianImpedanceController(LeafSystem):
         """
         plant, ctx = self._plant, self._plant_context
         plant.SetPositionsAndVelocities(ctx, x)
-        q, v = x[:7], x[7:]
+        v = x[7:]
         X_WE = self._frame_E.CalcPoseInWorld(ctx)
         J = plant.CalcJacobianSpatialVelocity(
             ctx, JacobianWrtVariable.kV, self._frame_E, self._zero3, self._world, self._world
         )
-        # Orientation error: rotation vector of Q_d o conj(Q_WE), shortest (angle <= pi).
-        dw, dx, dy, dz = (float(c) for c in X_WE_desired[3:])
-        inv_norm = 1.0 / math.sqrt(dw * dw + dx * dx + dy * dy + dz * dz)
-        Q = X_WE.rotation().ToQuaternion()
-        aw, ax, ay, az = Q.w(), -Q.x(), -Q.y(), -Q.z()
-        w = (dw * aw - dx * ax - dy * ay - dz * az) * inv_norm
-        ex = (dw * ax + dx * aw + dy * az - dz * ay) * inv_norm
-        ey = (dw * ay - dx * az + dy * aw + dz * ax) * inv_norm
-        ez = (dw * az + dx * ay - dy * ax + dz * aw) * inv_norm
-        if w < 0.0:
-            w, ex, ey, ez = -w, -ex, -ey, -ez
-        sin_half = math.sqrt(ex * ex + ey * ey + ez * ez)
-        scale = 2.0 * math.atan2(sin_half, w) / sin_half if sin_half > 1e-12 else 2.0
-        p_WE = X_WE.translation()
-        e = np.array(
-            [
-                scale * ex,
-                scale * ey,
-                scale * ez,
-                X_WE_desired[0] - p_WE[0],
-                X_WE_desired[1] - p_WE[1],
-                X_WE_desired[2] - p_WE[2],
-            ]
-        )
+        e = self._error
+        e[:3] = rotation_vector_between(X_WE_desired[3:], X_WE.rotation().ToQuaternion().wxyz())
+        e[3:] = X_WE_desired[:3] - X_WE.translation()
         V_error = V_WE_desired - J @ v if self.config.feedforward_twist else -(J @ v)
         D = self._damping() if self.config.update_damping_each_step else self._D
         wrench = self._K * e + D * V_error
-        tau_posture = self._kp_null * (self._q_nominal - q) - self._kd_null * v
+        tau_posture = self._kp_null * (self._q_nominal - x[:7]) - self._kd_null * v
         # J^T wrench + N tau_posture - tau_g with N tau0 = tau0 - J^T (J J^T)^-1 J tau0.
         y = np.linalg.solve(J @ J.T, J @ tau_posture)
         tau = J.T @ (wrench - y) + tau_posture - plant.CalcGravityGeneralizedForces(ctx)
