@@ -75,6 +75,108 @@ def _cmd_demo_record(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demo_teleop(args: argparse.Namespace) -> int:
+    """A demonstration driven from Meshcat sliders, recorded at 100 Hz."""
+    from pydrake.geometry import Meshcat
+
+    from rlfd_drake.demonstration import save_demonstration
+    from rlfd_drake.tasks import load_task
+    from rlfd_drake.teleop import (
+        STOP_BUTTON,
+        AddTeleopControls,
+        TeleopConfig,
+        record_teleop_demonstration,
+    )
+
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(f"{out} exists; pass --overwrite to replace it")
+    if out.suffix.lower() not in (".csv", ".npz"):
+        raise ValueError(f"--out must end in .csv or .npz, got {str(out)!r}")
+    config = TeleopConfig(duration_s=args.duration)
+    task = load_task(args.task, check_demo=False)
+    meshcat = Meshcat()
+    AddTeleopControls(meshcat, config)
+    print(
+        f"Meshcat: {meshcat.web_url()}\n"
+        "  drive the part with the x, y, z, roll, pitch, yaw sliders (offsets from the "
+        f"start pose); click '{STOP_BUTTON}' to finish (at most {config.duration_s:g} s)",
+        flush=True,
+    )
+    session = record_teleop_demonstration(task, config=config, meshcat=meshcat)
+    demo = session.demonstration
+    path = save_demonstration(demo, out, overwrite=args.overwrite)
+    print(
+        f"recorded {len(demo)} poses over {demo.duration:.2f} s "
+        f"(stopped by the {session.stopped_by}) -> {path}"
+    )
+    return 0
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    """One episode in Meshcat: live (prints the URL), or saved as a standalone HTML
+    replay that any browser opens without a server."""
+    import time
+
+    from pydrake.geometry import Meshcat
+
+    from rlfd_drake.diagram import NominalGoal
+    from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
+    from rlfd_drake.evaluate import make_policy
+    from rlfd_drake.tasks import load_task
+    from rlfd_drake.view import LookAtWorkCell
+
+    html = Path(args.html) if args.html else None
+    if html is not None:
+        if html.exists() and not args.overwrite:
+            raise FileExistsError(f"{html} exists; pass --overwrite to replace it")
+        if html.suffix.lower() not in (".html", ".htm"):
+            raise ValueError(f"--html must end in .html, got {str(html)!r}")
+        if not html.parent.is_dir():
+            raise ValueError(f"--html folder {str(html.parent)!r} does not exist")
+    if not (np.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
+        raise ValueError(f"--realtime-rate must be >= 0, got {args.realtime_rate}")
+    task = load_task(args.task)
+    policy_file = Path(args.policy.partition(":")[2] or args.policy)
+    if args.policy not in ("dmp", "random") and not policy_file.is_file():
+        raise ValueError(
+            f"--policy must be dmp, random or a saved policy .zip, got {args.policy!r} "
+            "(no such file)"
+        )
+    policy = make_policy(args.policy, episode_seed=args.seed)
+    dmp_model = load_task_dmp(task)
+    spec = make_episode_specs(task, 1, args.seed, grid=False)[0]
+    meshcat = Meshcat()
+    LookAtWorkCell(meshcat, NominalGoal(task))
+    print(f"Meshcat: {meshcat.web_url()}", flush=True)
+    result = run_episode(
+        task,
+        dmp_model,
+        spec,
+        policy,
+        meshcat=meshcat,
+        record_html=html,
+        realtime_rate=None if html is not None else args.realtime_rate,
+    )
+    outcome = "success" if result.success else f"failure ({result.failure_reason})"
+    print(
+        f"{task.name} {args.policy} seed {args.seed}: {outcome}, {result.sim_time_s:.1f} s "
+        f"simulated, final distance {1e3 * result.final_distance_m:.1f} mm"
+    )
+    if html is not None:
+        print(f"replay saved to {html} ({html.stat().st_size / 1e6:.1f} MB): open it in a browser")
+    else:
+        print("the recording is published: replay it from Meshcat's Animations controls")
+        if sys.stdin.isatty():
+            print("Ctrl-C to quit", flush=True)
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+    return 0
+
+
 #: The residual policy `make demo` uses, trained by the command in its README line.
 SHIPPED_POLICY = "policies/peg_easy_ppo.zip"
 
@@ -186,10 +288,37 @@ def _cmd_train(args: argparse.Namespace) -> int:
         reward=args.reward,
         curriculum=args.curriculum,
         eval_every_episodes=args.eval_every,
+        sac_target_entropy=args.sac_target_entropy,
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
     _print_json({"run": str(out), **metrics})
+    return 0
+
+
+def _cmd_baseline(args: argparse.Namespace) -> int:
+    from rlfd_drake.baselines.episodic import BaselineConfig, train_baseline
+
+    config = BaselineConfig(
+        task=args.task,
+        method=args.method,
+        episodes=args.episodes,
+        seed=args.seed,
+        workers=args.workers,
+        residual_mode=args.residual_mode,
+    )
+    out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.method}_s{args.seed}"
+    metrics = train_baseline(config, out, progress=not args.no_progress)
+    _print_json({"run": str(out), "policy": str(out / "baseline.npz"), **metrics})
+    return 0
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from rlfd_drake.reproduce import TABLES, reproduce_table
+
+    numbers = sorted(TABLES) if args.table == "all" else [args.table]
+    for number in numbers:
+        reproduce_table(number, budget=args.budget, seed=args.seed, workers=args.workers)
     return 0
 
 
@@ -207,7 +336,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         deterministic=not args.stochastic,
     )
     mode = "_stochastic" if args.stochastic else ""
-    name = args.name or f"eval_{args.task}_{Path(args.policy).stem}{mode}_s{args.seed}"
+    policy_path = Path(args.policy)
+    # A baseline run folder names its file baseline.npz: the folder tells them apart.
+    stem = policy_path.parent.name if policy_path.suffix == ".npz" else policy_path.stem
+    name = args.name or f"eval_{args.task}_{stem}{mode}_s{args.seed}"
     paths = write_evaluation(result, name)
     if args.json:
         _print_json(result)
@@ -255,6 +387,14 @@ def build_parser() -> argparse.ArgumentParser:
     record.add_argument("--seed", type=int, default=0)
     record.add_argument("--overwrite", action="store_true")
     record.set_defaults(func=_cmd_demo_record)
+    teleop = demo_sub.add_parser(
+        "teleop", help="record a demonstration by driving the part from Meshcat sliders"
+    )
+    teleop.add_argument("--task", required=True)
+    teleop.add_argument("--out", required=True, help="file .csv or .npz")
+    teleop.add_argument("--duration", type=float, default=60.0, help="longest recording, s")
+    teleop.add_argument("--overwrite", action="store_true")
+    teleop.set_defaults(func=_cmd_demo_teleop)
 
     fit = sub.add_parser("fit", help="fit a Cartesian DMP to a demonstration")
     fit.add_argument("--demo", required=True, help="demonstration file .csv or .npz")
@@ -276,14 +416,49 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--reward", choices=["sparse", "dense"], default="sparse")
     train.add_argument("--curriculum", action="store_true", help="grow the start perturbation")
     train.add_argument("--eval-every", type=int, default=0, help="evaluate every N episodes")
+    train.add_argument(
+        "--sac-target-entropy",
+        type=float,
+        default=None,
+        help="SAC: entropy the tuning holds (default SB3's -6; +1 keeps a ~0.3 std jiggle)",
+    )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")
     train.add_argument("--no-progress", action="store_true", help="no progress bar")
     train.set_defaults(func=_cmd_train)
 
+    baseline = sub.add_parser(
+        "baseline", help="train an episodic baseline (PoWER, FDG, eNAC, RLS linear)"
+    )
+    baseline.add_argument("--task", default="peg_easy")
+    baseline.add_argument("--method", choices=["power", "fdg", "enac", "linear"], required=True)
+    baseline.add_argument("--episodes", type=int, default=100)
+    baseline.add_argument("--seed", type=int, default=0)
+    baseline.add_argument("--workers", type=int, default=2)
+    baseline.add_argument(
+        "--residual-mode",
+        choices=["full", "translation", "orientation"],
+        default="full",
+        help="linear only: which parts of the residual it adapts",
+    )
+    baseline.add_argument("--out", help="run folder (default runs/<task>_<method>_s<seed>)")
+    baseline.add_argument("--no-progress", action="store_true")
+    baseline.set_defaults(func=_cmd_baseline)
+
+    reproduce = sub.add_parser(
+        "reproduce", help="measure the paper's tables (training what is missing)"
+    )
+    reproduce.add_argument("--table", choices=["1", "2", "4", "all"], default="all")
+    reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
+    reproduce.add_argument("--seed", type=int, default=0)
+    reproduce.add_argument("--workers", type=int, default=2)
+    reproduce.set_defaults(func=_cmd_reproduce)
+
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
     evaluate.add_argument("--task", default="peg_easy")
-    evaluate.add_argument("--policy", default="dmp", help="dmp | random | PATH to a policy zip")
+    evaluate.add_argument(
+        "--policy", default="dmp", help="dmp | random | PATH to a policy zip or baseline.npz"
+    )
     evaluate.add_argument("--episodes", type=int, default=None, help="default: the task's grid")
     evaluate.add_argument("--seed", type=int, default=0)
     evaluate.add_argument("--workers", type=int, default=2)
@@ -299,6 +474,20 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--name", help="results file stem")
     evaluate.add_argument("--json", action="store_true", help="print the JSON result")
     evaluate.set_defaults(func=_cmd_evaluate)
+
+    view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
+    view.add_argument("--task", default="peg_easy")
+    view.add_argument("--policy", default="dmp", help="dmp | random | PATH to a policy zip")
+    view.add_argument("--seed", type=int, default=0, help="seed of the start and fixture error")
+    view.add_argument("--html", help="save a standalone HTML replay here instead of live")
+    view.add_argument("--overwrite", action="store_true", help="replace an existing --html")
+    view.add_argument(
+        "--realtime-rate",
+        type=float,
+        default=1.0,
+        help="live only: pace as a multiple of real time (0 = as fast as possible)",
+    )
+    view.set_defaults(func=_cmd_view)
     return parser
 
 

@@ -19,9 +19,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, PassThrough, VectorLogSink
+from pydrake.systems.primitives import Gain, LogVectorOutput, PassThrough, VectorLogSink
 
 from rlfd_drake.dmp import CartesianDmp
 from rlfd_drake.scene import AddRlfdScene, Scene, SceneConfig, SolvePandaIK
@@ -35,7 +36,15 @@ from rlfd_drake.systems.impedance import (
 )
 from rlfd_drake.systems.observer import OBSERVATION_SIZE, Observer, ObserverConfig
 from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
+from rlfd_drake.systems.setpoint_triad import SetpointTriad
 from rlfd_drake.tasks import TaskSpec
+from rlfd_drake.view import (
+    BASE_SETPOINT_PATH,
+    SETPOINT_PATH,
+    DrawDmpPlan,
+    DrawGoals,
+    EpisodeViewConfig,
+)
 
 #: The residual's dimension: translation (3) then angle-axis (3), in [-1, 1].
 RESIDUAL_SIZE = 6
@@ -102,6 +111,20 @@ class RlfdDiagram:
     residual_policy: ResidualPolicy | None
     logs: dict[str, VectorLogSink]
     X_WGoal_nominal: RigidTransform
+    meshcat: Meshcat | None = None
+    view_config: EpisodeViewConfig | None = None
+
+
+def MakeSceneControlModel(scene: Scene) -> MultibodyPlant:
+    """The impedance controller's model of the arm in ``scene``: it knows its payload (as a
+    real Franka is told its load), the part's mass and centre of mass in the hand frame
+    H, and controls the part frame P (E = P), but not the fixture."""
+    inertia = scene.part_body.default_spatial_inertia()
+    return MakePandaControlModel(
+        X_HE=scene.X_HP,
+        payload_mass_kg=inertia.get_mass(),
+        payload_com_H=scene.X_HP @ inertia.get_com(),
+    )
 
 
 def NominalGoal(task: TaskSpec) -> RigidTransform:
@@ -117,8 +140,10 @@ def BuildRlfdDiagram(
     config: RlfdDiagramConfig | None = None,
     *,
     policy: Callable[[np.ndarray], np.ndarray] | None = None,
+    coupling_policy: Callable[[np.ndarray], np.ndarray] | None = None,
     fixture_error: RigidTransform | None = None,
     meshcat: Meshcat | None = None,
+    view_config: EpisodeViewConfig | None = None,
 ) -> RlfdDiagram:
     """Builds the rLfD diagram of ``task``.
 
@@ -128,8 +153,18 @@ def BuildRlfdDiagram(
         config: rates and gains (default RlfdDiagramConfig()).
         policy: a residual policy obs (26,) -> action (6,) in [-1, 1] run inside the
             diagram at 10 Hz; None exports the input port ``residual`` instead.
+        coupling_policy: a policy obs (26,) -> normalised coupling term (6,) in
+            [-1, 1] of the DMP (the eNAC baseline explores there, Table I type B), run
+            at the residual's rate from t = 0; a unit value is the C_t that moves the
+            DMP's rest point by ``max_translation_m`` / ``max_rotation_rad`` (C_t /
+            (alpha_z beta_z)). None leaves the coupling input unconnected (C_t = 0).
         fixture_error: X_err, calibration error of the fixture (None = none).
-        meshcat: if given, the scene and the hydroelastic contact surfaces are drawn.
+        meshcat: if given, the scene, the hydroelastic contact surfaces and forces, the
+            nominal and true goals and (as triads that follow them) the corrected and the
+            DMP's set-points are drawn; ``SetEpisodeStart`` draws the DMP's plan (see
+            :mod:`rlfd_drake.view`).
+        view_config: how the goals, set-points and plan are drawn (default
+            EpisodeViewConfig()).
 
     Exported ports: input ``residual`` (6, only when ``policy`` is None); outputs
     ``observation`` (26), ``reward`` (1), ``success`` (1), ``force_metrics`` (3),
@@ -140,15 +175,7 @@ def BuildRlfdDiagram(
     scene = AddRlfdScene(builder, task, config.scene, fixture_error)
     plant = scene.plant
 
-    part_inertia = scene.part_body.default_spatial_inertia()
-    # The controller knows its payload (as a real Franka is told its load): the part's
-    # mass and centre of mass, expressed in the hand frame H.
-    p_HPcm = scene.X_HP @ part_inertia.get_com()
-    control_plant = MakePandaControlModel(
-        X_HE=scene.X_HP,
-        payload_mass_kg=part_inertia.get_mass(),
-        payload_com_H=p_HPcm,
-    )
+    control_plant = MakeSceneControlModel(scene)
     controller = builder.AddNamedSystem(
         "impedance", CartesianImpedanceController(control_plant, config.impedance)
     )
@@ -227,6 +254,22 @@ def BuildRlfdDiagram(
         connect(observer.GetOutputPort("observation"), residual_policy.GetInputPort("observation"))
         residual_source = residual_policy.GetOutputPort("residual")
     connect(residual_source, composer.GetInputPort("residual"))
+    if coupling_policy is not None:
+        coupling = builder.AddNamedSystem(
+            "coupling_policy",
+            ResidualPolicy(
+                coupling_policy,
+                ResidualPolicyConfig(
+                    period_s=config.residual_period_s, observation_size=OBSERVATION_SIZE
+                ),
+            ),
+        )
+        rest_gain = dmp_model.config.alpha_z * dmp_model.config.beta_z
+        scale = np.array([config.max_translation_m] * 3 + [config.max_rotation_rad] * 3) * rest_gain
+        coupling_gain = builder.AddNamedSystem("coupling_scale", Gain(scale))
+        connect(observer.GetOutputPort("observation"), coupling.GetInputPort("observation"))
+        connect(coupling.GetOutputPort("residual"), coupling_gain.get_input_port())
+        connect(coupling_gain.get_output_port(), dmp_system.GetInputPort("coupling"))
     connect(residual_source, observer.GetInputPort("residual"))
 
     for name in ("observation", "reward", "success", "force_metrics", "distance_to_goal"):
@@ -268,6 +311,22 @@ def BuildRlfdDiagram(
         params.force_threshold = 0.5
         ContactVisualizer.AddToBuilder(builder, plant, meshcat, params)
 
+        view_config = view_config if view_config is not None else EpisodeViewConfig()
+        # The gap between the two triads is the residual's correction.
+        corrected = builder.AddNamedSystem(
+            "setpoint_triad",
+            SetpointTriad(meshcat, SETPOINT_PATH, view_config.triad_period_s, view_config.setpoint),
+        )
+        connect(composer.GetOutputPort("X_WE_desired"), corrected.GetInputPort("X_WE"))
+        base = builder.AddNamedSystem(
+            "dmp_setpoint_triad",
+            SetpointTriad(
+                meshcat, BASE_SETPOINT_PATH, view_config.triad_period_s, view_config.base_setpoint
+            ),
+        )
+        connect(extrapolator.GetOutputPort("X_WE_desired"), base.GetInputPort("X_WE"))
+        DrawGoals(meshcat, X_WGoal_nominal, scene.X_WGoal, view_config)
+
     diagram = builder.Build()
     diagram.set_name(f"rlfd_{task.name}")
     return RlfdDiagram(
@@ -283,6 +342,8 @@ def BuildRlfdDiagram(
         residual_policy=residual_policy,
         logs=logs,
         X_WGoal_nominal=X_WGoal_nominal,
+        meshcat=meshcat,
+        view_config=view_config,
     )
 
 
@@ -293,7 +354,9 @@ def SetEpisodeStart(
     q_seed: np.ndarray | None = None,
 ) -> np.ndarray:
     """Puts the arm at rest with the part at ``X_WP_start`` (by IK) and starts the DMP
-    there: the DMP generalises from the robot's actual start pose. Returns q (7,)."""
+    there: the DMP generalises from the robot's actual start pose. Returns q (7,).
+
+    If the diagram draws into a Meshcat, the DMP's plan from there is drawn too."""
     scene = rlfd.scene
     q = SolvePandaIK(scene, X_WP_start, q_seed)
     plant_context = scene.plant.GetMyMutableContextFromRoot(context)
@@ -302,6 +365,8 @@ def SetEpisodeStart(
     X_WP = scene.frame_P.CalcPoseInWorld(plant_context)
     dmp_context = rlfd.dmp.GetMyMutableContextFromRoot(context)
     rlfd.dmp.SetStartPose(dmp_context, X_WP.translation(), X_WP.rotation().ToQuaternion().wxyz())
+    if rlfd.meshcat is not None:
+        DrawDmpPlan(rlfd.meshcat, rlfd.dmp.model, X_WP, rlfd.task.episode_time_s, rlfd.view_config)
     return q
 
 

@@ -253,8 +253,10 @@ def run_episode(
     meshcat: Meshcat | None = None,
     record_html: str | Path | None = None,
     *,
+    coupling_policy: Callable[[np.ndarray], np.ndarray] | None = None,
     stop_after_success_s: float | None = 0.5,
     chunk_s: float = 0.1,
+    realtime_rate: float | None = None,
 ) -> EpisodeResult:
     """Runs one episode and measures it.
 
@@ -269,27 +271,42 @@ def run_episode(
         meshcat: if given, the episode is drawn and recorded as an animation.
         record_html: if given (with meshcat), the recording is saved there as a
             self-contained HTML page.
+        coupling_policy: a policy of the DMP's coupling term (see ``BuildRlfdDiagram``;
+            the eNAC baseline), or None.
         stop_after_success_s: stop once success has latched and the part has been
             within kappa for this long, s (checked every ``chunk_s``); None runs the
             whole episode.
         chunk_s: simulation is advanced in chunks of this length, s.
+        realtime_rate: if given (with meshcat), the episode is drawn live while it is
+            recorded, paced at this multiple of real time (0 = as fast as possible), so
+            that it can be watched; None records without drawing live (faster).
 
     Returns:
         The episode's result. Never raises for simulator, IK or policy failures.
 
     Raises:
-        ValueError: ``record_html`` without ``meshcat``.
+        ValueError: ``record_html`` without ``meshcat``, or a negative ``realtime_rate``.
     """
     wall_start = time.perf_counter()
     if record_html is not None and meshcat is None:
         raise ValueError("record_html needs a meshcat to record into")
+    if realtime_rate is not None and not (math.isfinite(realtime_rate) and realtime_rate >= 0):
+        raise ValueError(f"realtime_rate must be a number >= 0, got {realtime_rate}")
     config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
     X_err = FixtureErrorTransform(np.asarray(spec.fixture_dp), np.asarray(spec.fixture_dq))
     rlfd = BuildRlfdDiagram(
-        task, dmp_model, config, policy=policy, fixture_error=X_err, meshcat=meshcat
+        task,
+        dmp_model,
+        config,
+        policy=policy,
+        coupling_policy=coupling_policy,
+        fixture_error=X_err,
+        meshcat=meshcat,
     )
     diagram = rlfd.diagram
     simulator = MakeSimulator(rlfd)
+    if realtime_rate is not None:
+        simulator.set_target_realtime_rate(realtime_rate)
     context = simulator.get_mutable_context()
     if policy is None:
         diagram.GetInputPort("residual").FixValue(context, np.zeros(RESIDUAL_SIZE))
@@ -322,7 +339,7 @@ def run_episode(
         return result(f"ik: {_first_line(e)}", False)
 
     if meshcat is not None:
-        meshcat.StartRecording(set_visualizations_while_recording=False)
+        meshcat.StartRecording(set_visualizations_while_recording=realtime_rate is not None)
     failure: str | None = None
     within_since: float | None = None
     latched_at: float | None = None

@@ -10,6 +10,8 @@ Policies are named by a string, so that worker processes can build their own:
 * a path to a Stable-Baselines3 model ``.zip`` (PPO, SAC, TD3 or sb3-contrib
   RecurrentPPO, told apart by the zip's metadata; ``"ppo:path"``, ``"sac:path"``,
   ``"td3:path"``, ``"recurrent_ppo:path"`` force the class), run deterministically.
+* a path to an episodic baseline ``baseline.npz`` (``rlfd baseline``: PoWER/FDG DMP
+  weights, the eNAC coupling policy or the RLS linear residual), run with its mean.
 """
 
 from __future__ import annotations
@@ -122,13 +124,31 @@ def _init_worker(
         residual_mode=residual_mode,
         config=config,
         deterministic=deterministic,
+        kit=None,
     )
-    if policy_spec not in ("dmp", "random"):
+    if policy_spec.endswith(".npz"):
+        # An episodic baseline (rlfd baseline): it may replace the DMP or drive its
+        # coupling term, so it is loaded as a kit rather than a residual policy.
+        from rlfd_drake.baselines.episodic import load_baseline
+
+        _WORKER["kit"] = load_baseline(policy_spec, task, _WORKER["dmp"])
+    elif policy_spec not in ("dmp", "random"):
         make_policy(policy_spec, residual_mode)  # load the model once, fail early
 
 
 def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
     index, episode_seed, spec = job
+    kit = _WORKER.get("kit")
+    if kit is not None:
+        result = run_episode(
+            _WORKER["task"],
+            kit.dmp,
+            spec,
+            policy=kit.policy,
+            coupling_policy=kit.coupling_policy,
+            diagram_config=_WORKER["config"],
+        )
+        return index, result
     policy = make_policy(
         _WORKER["policy_spec"], _WORKER["residual_mode"], episode_seed, _WORKER["deterministic"]
     )

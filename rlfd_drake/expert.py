@@ -23,7 +23,7 @@ from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from rlfd_drake.demonstration import Demonstration
-from rlfd_drake.diagram import NominalGoal
+from rlfd_drake.diagram import MakeSceneControlModel, NominalGoal
 from rlfd_drake.geometry import (
     quat_conjugate,
     quat_from_rotation_matrix,
@@ -37,7 +37,6 @@ from rlfd_drake.scene import AddRlfdScene, SceneConfig, SolvePandaIK
 from rlfd_drake.systems.impedance import (
     CartesianImpedanceConfig,
     CartesianImpedanceController,
-    MakePandaControlModel,
 )
 from rlfd_drake.tasks import TaskSpec
 
@@ -157,12 +156,7 @@ def record_demonstration(
     builder = DiagramBuilder()
     scene = AddRlfdScene(builder, task, SceneConfig())
     plant = scene.plant
-    inertia = scene.part_body.default_spatial_inertia()
-    control_plant = MakePandaControlModel(
-        X_HE=scene.X_HP,
-        payload_mass_kg=inertia.get_mass(),
-        payload_com_H=scene.X_HP @ inertia.get_com(),
-    )
+    control_plant = MakeSceneControlModel(scene)
     controller = builder.AddSystem(
         CartesianImpedanceController(control_plant, CartesianImpedanceConfig())
     )

@@ -70,6 +70,10 @@ class TrainConfig:
             uniformly over the action space, which here means large random residuals).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
             coefficient.
+        sac_target_entropy: the entropy SAC's coefficient tuning holds the policy at;
+            None = SB3's -dim(A) = -6, i.e. a pre-squashing std of about 0.09 per axis
+            (sub-millimetre jiggle). Each +6 multiplies that std by e: +1 keeps it
+            near 0.3, the jiggle that finds a hole (paper Sec. I).
     """
 
     task: str = "peg_easy"
@@ -90,6 +94,7 @@ class TrainConfig:
     ppo_n_steps: int = 256
     sac_learning_starts: int = 0
     sac_initial_ent_coef: float = 0.01
+    sac_target_entropy: float | None = None
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -108,6 +113,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.eval_every_episodes < 0:
             raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
+        if self.sac_target_entropy is not None and not np.isfinite(self.sac_target_entropy):
+            raise ValueError(f"sac_target_entropy must be finite, got {self.sac_target_entropy}")
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
 
@@ -188,6 +195,9 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             # policy widened until its residuals knocked the part off the hole
             # (success fell from ~90% to ~35% after 100 episodes). Start it small.
             ent_coef=f"auto_{config.sac_initial_ent_coef}",
+            target_entropy="auto"
+            if config.sac_target_entropy is None
+            else float(config.sac_target_entropy),
             policy_kwargs=dict(net_arch=dict(pi=[400, 300], qf=[300]), activation_fn=torch.nn.ReLU),
             **common,
         )

@@ -81,7 +81,18 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
         train(config, run, progress_bar=False)
 
 
+def test_sac_target_entropy_reaches_the_model():
+    default = make_model(TrainConfig(algo="sac", envs=1, history=1), fast_venv(), None)
+    assert default.target_entropy == -6.0  # SB3's -dim(A)
+    wide = make_model(
+        TrainConfig(algo="sac", envs=1, history=1, sac_target_entropy=1.0), fast_venv(), None
+    )
+    assert wide.target_entropy == 1.0
+
+
 def test_bad_config_names_the_field():
+    with pytest.raises(ValueError, match="sac_target_entropy"):
+        TrainConfig(sac_target_entropy=float("nan"))
     with pytest.raises(ValueError, match="algo must be one of"):
         TrainConfig(algo="dqn")
     with pytest.raises(ValueError, match="episodes must be >= 1"):

@@ -1,0 +1,63 @@
+"""rlfd reproduce: table assembly (the measurements are stubbed by stored results)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import rlfd_drake.reproduce as reproduce
+
+
+def _fake_evaluation(task, policy, name, mode, episodes, seed, workers):
+    rate = {"dmp": 0.5, "random": 0.6}.get(policy, 0.7)
+    return {
+        "success_rate": rate,
+        "success_std": 0.05,
+        "insertion_time_s": 6.0,
+        "peak_force_n": 40.0,
+        "episodes": episodes,
+    }
+
+
+def test_reproduce_table_writes_paper_and_ours_side_by_side(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    trained = []
+
+    def fake_run(method, task, mode, episodes, seed, workers):
+        trained.append((method, task, mode, episodes))
+        return tmp_path / "runs" / f"{task}_{method}" / "baseline.npz"
+
+    monkeypatch.setattr(reproduce, "_evaluation", _fake_evaluation)
+    monkeypatch.setattr(reproduce, "_baseline_run", fake_run)
+    data = reproduce.reproduce_table("1", budget="quick", seed=0, workers=1)
+    # Every baseline of Table I is trained on the easy hole only, with the quick budget.
+    assert sorted(trained) == sorted(
+        (m, "peg_easy", "full", 100) for m in ("enac", "fdg", "power") for _ in (0, 1)
+    )
+    rows = {row["label"]: row for row in data["rows"]}
+    assert rows["A  DMP"]["ours"]["easy"]["success_pct"] == pytest.approx(50.0)
+    assert rows["A  DMP"]["paper"]["easy"] == 24.0
+    markdown = (tmp_path / "results" / "table_1.md").read_text()
+    assert "| A  DMP | 24.0 | 50.0 +- 5.0 | 8.0 | 50.0 +- 5.0 | n/a |" in markdown
+    stored = json.loads((tmp_path / "results" / "table_1.json").read_text())
+    assert stored["seed"] == 0 and "command" in stored
+
+
+def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(reproduce, "_evaluation", _fake_evaluation)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
+    sac = next(row for row in data["rows"] if row["label"] == "rLfD SAC")
+    assert sac["ours"]["easy"]["status"] == "not run"
+    markdown = (tmp_path / "results" / "table_2.md").read_text()
+    assert "Not run: deep-RL training per row" in markdown
+
+
+@pytest.mark.parametrize(("table", "budget"), [("9", "quick"), ("1", "huge")])
+def test_reproduce_rejects_unknown_tables_and_budgets(table, budget):
+    with pytest.raises(ValueError, match="table|budget"):
+        reproduce.reproduce_table(table, budget=budget)
