@@ -448,7 +448,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = sub.add_parser(
         "reproduce", help="measure the paper's tables (training what is missing)"
     )
-    reproduce.add_argument("--table", choices=["1", "2", "4", "all"], default="all")
+    reproduce.add_argument("--table", choices=["1", "2", "4", "5", "forces", "all"], default="all")
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
     reproduce.add_argument("--seed", type=int, default=0)
     reproduce.add_argument("--workers", type=int, default=2)

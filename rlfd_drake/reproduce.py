@@ -21,7 +21,7 @@ listed with the paper's number and "not run" and the reason, never left out.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from rlfd_drake.paths import models_dir
@@ -57,10 +57,14 @@ class Row:
 
 @dataclass(frozen=True)
 class Table:
+    """A table: its rows, its columns (label -> task) and the metric it reports
+    ("success" %, "insertion_time" s or "peak_force" N)."""
+
     title: str
-    columns: dict[str, str]  # column label -> task name
+    columns: dict[str, str]
     rows: list[Row] = field(default_factory=list)
     note: str = ""
+    metric: str = "success"
 
 
 _SIM = {"easy": "peg_easy", "hard": "peg_hard"}
@@ -137,6 +141,37 @@ TABLES: dict[str, Table] = {
         "Linear is trained on each column's task.",
     ),
 }
+
+# Table V reports insertion times of Table IV's rows; the force comparison (paper
+# Sec. VI, qualitative) uses Table I's and II's rows. Both reuse those evaluations.
+TABLES["5"] = Table(
+    "Table V: insertion time (s) of the full-pose policies",
+    _PHYSICAL,
+    [
+        replace(row, paper=paper)
+        for row, paper in zip(
+            TABLES["4"].rows,
+            [
+                {"peg": 7.0, "gear": 8.1, "rj45": 10.0},
+                {"peg": None, "gear": None, "rj45": None},
+                {"peg": None, "gear": None, "rj45": None},
+                {"peg": 7.1, "gear": 6.6, "rj45": 8.7},
+                {"peg": 6.3, "gear": 6.2, "rj45": 8.6},
+                {"peg": 5.1, "gear": 5.9, "rj45": 8.4},
+            ],
+            strict=True,
+        )
+    ],
+    "Mean over successful episodes.",
+    metric="insertion_time",
+)
+TABLES["forces"] = Table(
+    "Contact forces: peak total contact force (N), mean over episodes",
+    _SIM,
+    [replace(row, paper={}) for row in TABLES["1"].rows + TABLES["2"].rows[:2]],
+    "The paper reports forces qualitatively: rLfD feels forces comparable to the DMP's.",
+    metric="peak_force",
+)
 
 
 def _baseline_run(
@@ -216,6 +251,21 @@ def _cell(row: Row, task: str, budget: str, seed: int, workers: int) -> dict:
     }
 
 
+_METRIC_TEXT = {
+    "success": "Success %, ours = mean +- std (over bins where the grid has several, else "
+    "binomial)",
+    "insertion_time": "Insertion time, s",
+    "peak_force": "Peak contact force, N",
+}
+
+
+def _format_metric(cell: dict, metric: str) -> str:
+    if metric == "success":
+        return f"{cell['success_pct']:.1f} +- {cell['success_std_pct']:.1f}"
+    value = cell["insertion_time_s"] if metric == "insertion_time" else cell["peak_force_n"]
+    return "n/a" if value is None else f"{value:.1f}"
+
+
 def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed: int) -> str:
     columns = list(table.columns)
     header = (
@@ -226,8 +276,8 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
     lines = [
         f"# {table.title}",
         "",
-        f"Success %, ours = mean +- std on this simulator (budget `{budget}`, seed {seed}); "
-        "the std is over bins where the grid has several, else binomial. " + table.note,
+        f"{_METRIC_TEXT[table.metric]} on this simulator (budget `{budget}`, seed {seed}). "
+        + table.note,
         "",
         header,
         "|" + "---|" * (2 * len(columns) + 2),
@@ -240,7 +290,7 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
             cell = cells[row.label][column]
             parts.append("n/a" if paper is None else f"{paper:.1f}")
             if cell["status"] == "measured":
-                parts.append(f"{cell['success_pct']:.1f} +- {cell['success_std_pct']:.1f}")
+                parts.append(_format_metric(cell, table.metric))
                 trained = cell["training_episodes"] or "n/a"
             else:
                 parts.append("not run")

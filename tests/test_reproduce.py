@@ -61,3 +61,28 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
 def test_reproduce_rejects_unknown_tables_and_budgets(table, budget):
     with pytest.raises(ValueError, match="table|budget"):
         reproduce.reproduce_table(table, budget=budget)
+
+
+def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    calls = []
+
+    def counting(*args):
+        calls.append(args[2])
+        return _fake_evaluation(*args)
+
+    monkeypatch.setattr(reproduce, "_evaluation", counting)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    reproduce.reproduce_table("5", budget="quick", seed=0, workers=1)
+    markdown = (tmp_path / "results" / "table_5.md").read_text()
+    assert "Insertion time, s" in markdown
+    assert "| None / None | 7.0 | 6.0 | 8.1 | 6.0 | 10.0 | 6.0 | n/a |" in markdown
+    reproduce.reproduce_table("forces", budget="quick", seed=0, workers=1)
+    assert (
+        "| A  DMP | n/a | 40.0 | n/a | 40.0 | n/a |"
+        in (tmp_path / "results" / "table_forces.md").read_text()
+    )
+    # Table V's evaluations are Table IV's: same result names.
+    assert all(name.startswith("eval_") for name in calls)
