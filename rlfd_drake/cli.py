@@ -177,8 +177,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-#: The residual policy `make demo` uses, trained by the command in its README line.
-SHIPPED_POLICY = "policies/peg_easy_ppo.zip"
+from rlfd_drake.paths import SHIPPED_POLICY  # noqa: E402  (re-exported for notebooks)
 
 
 def _cmd_demo_main(args: argparse.Namespace) -> int:
@@ -313,6 +312,14 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from rlfd_drake.policies import export_policy
+
+    path = export_policy(args.policy, args.out, overwrite=args.overwrite)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from rlfd_drake.reproduce import TABLES, reproduce_table
 
@@ -444,6 +451,14 @@ def build_parser() -> argparse.ArgumentParser:
     baseline.add_argument("--out", help="run folder (default runs/<task>_<method>_s<seed>)")
     baseline.add_argument("--no-progress", action="store_true")
     baseline.set_defaults(func=_cmd_baseline)
+
+    export = sub.add_parser(
+        "export", help="a deployment copy of a trained policy (no optimizer state)"
+    )
+    export.add_argument("--policy", required=True, help="trained SB3 policy zip")
+    export.add_argument("--out", required=True, help="destination .zip")
+    export.add_argument("--overwrite", action="store_true")
+    export.set_defaults(func=_cmd_export)
 
     reproduce = sub.add_parser(
         "reproduce", help="measure the paper's tables (training what is missing)"

@@ -5,6 +5,11 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+#: The shipped rLfD residual (SAC, peg_easy) that `make demo` and `rlfd reproduce` use,
+#: and the earlier PPO one; their commands are in models/policies/README.md.
+SHIPPED_POLICY = "policies/peg_easy_sac.zip"
+SHIPPED_PPO_POLICY = "policies/peg_easy_ppo.zip"
+
 
 def models_dir() -> Path:
     """The folder of the shipped models (top-level ``models/``, installed as

@@ -74,6 +74,40 @@ def load_sb3_model(spec: str | Path):
     raise ValueError(f"could not load {path} as an SB3 model: " + "; ".join(errors))
 
 
+def _optimizers(model) -> list:
+    """The torch optimizers an SB3 model saves with its parameters."""
+    found = []
+    for owner in (model.policy, getattr(model, "actor", None), getattr(model, "critic", None)):
+        optimizer = getattr(owner, "optimizer", None) if owner is not None else None
+        if optimizer is not None and all(optimizer is not f for f in found):
+            found.append(optimizer)
+    entropy = getattr(model, "ent_coef_optimizer", None)
+    if entropy is not None:
+        found.append(entropy)
+    return found
+
+
+def export_policy(source: str | Path, destination: str | Path, overwrite: bool = False) -> Path:
+    """Writes a deployment copy of a trained SB3 model: the same networks (so the same
+    actions) without the optimizers' moment estimates, which are as large as the
+    networks and only matter for continuing training (use the run folder's
+    checkpoints for that).
+
+    Raises:
+        FileExistsError: ``destination`` exists and ``overwrite`` is False.
+    """
+    destination = Path(destination)
+    if destination.exists() and not overwrite:
+        raise FileExistsError(f"{destination} exists; pass overwrite=True to replace it")
+    if destination.suffix != ".zip":
+        raise ValueError(f"destination must end in .zip, got {str(destination)!r}")
+    model, _ = load_sb3_model(source)
+    for optimizer in _optimizers(model):
+        optimizer.state.clear()
+    model.save(destination)
+    return destination
+
+
 class DeployedPolicy:
     """A trained SB3 model as the residual policy inside the diagram: obs (26,) ->
     action (6,).

@@ -24,15 +24,15 @@ import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from rlfd_drake.paths import models_dir
+from rlfd_drake.paths import SHIPPED_POLICY, SHIPPED_PPO_POLICY, models_dir
 from rlfd_drake.results import results_dir, write_result
 
 __all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table"]
 
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
-#: The shipped rLfD policy (trained on peg_easy by its README's command).
-SHIPPED_POLICY = "policies/peg_easy_ppo.zip"
+#: Training episodes of the shipped policies (models/policies/README.md).
+_SHIPPED_EPISODES = {SHIPPED_POLICY: 700, SHIPPED_PPO_POLICY: 700}
 
 
 @dataclass(frozen=True)
@@ -41,11 +41,13 @@ class Row:
 
     Attributes:
         label: the row's name (the paper's, plus what differs here).
-        source: "dmp", "random", "shipped", "baseline:<method>" (trained per training
-            task) or "none:<reason>" (not produced by this code yet).
+        source: "dmp", "random", "policy:<file under models/>" (a shipped policy),
+            "baseline:<method>" (trained per training task) or "none:<reason>" (not
+            produced by this code yet).
         paper: the paper's success % per column (None where it reports none).
         residual_mode: composer mode of the evaluation (and of the linear baseline).
         train_task: task the baseline is trained on; None = each column's own task.
+        stochastic: a trained policy samples its actions (seeded) instead of its mean.
     """
 
     label: str
@@ -53,6 +55,7 @@ class Row:
     paper: dict[str, float | None]
     residual_mode: str = "full"
     train_task: str | None = None
+    stochastic: bool = False
 
 
 @dataclass(frozen=True)
@@ -96,9 +99,15 @@ TABLES: dict[str, Table] = {
                 train_task="peg_easy",
             ),
             Row(
-                "D  rLfD (paper: SAC; here: the shipped PPO)",
-                "shipped",
+                "D  rLfD SAC (shipped), mean action",
+                f"policy:{SHIPPED_POLICY}",
                 {"easy": 94.8, "hard": 55.0},
+            ),
+            Row(
+                "D  rLfD SAC (shipped), sampled actions",
+                f"policy:{SHIPPED_POLICY}",
+                {"easy": 94.8, "hard": 55.0},
+                stochastic=True,
             ),
         ],
         "Baselines are trained on peg_easy and evaluated on both holes, as in the paper.",
@@ -114,8 +123,22 @@ TABLES: dict[str, Table] = {
                 {"easy": 25.4, "hard": 8.0},
                 train_task="peg_easy",
             ),
-            Row("rLfD SAC", _NO_DEEP_RL, {"easy": 94.8, "hard": 55.0}),
-            Row("rLfD PPO (shipped)", "shipped", {"easy": 87.6, "hard": 69.0}),
+            Row(
+                "rLfD SAC (shipped), mean action",
+                f"policy:{SHIPPED_POLICY}",
+                {"easy": 94.8, "hard": 55.0},
+            ),
+            Row(
+                "rLfD PPO (shipped), mean action",
+                f"policy:{SHIPPED_PPO_POLICY}",
+                {"easy": 87.6, "hard": 69.0},
+            ),
+            Row(
+                "rLfD PPO (shipped), sampled actions",
+                f"policy:{SHIPPED_PPO_POLICY}",
+                {"easy": 87.6, "hard": 69.0},
+                stochastic=True,
+            ),
         ],
     ),
     "4": Table(
@@ -200,7 +223,14 @@ def _baseline_run(
 
 
 def _evaluation(
-    task: str, policy: str, name: str, mode: str, episodes: int, seed: int, workers: int
+    task: str,
+    policy: str,
+    name: str,
+    mode: str,
+    episodes: int,
+    seed: int,
+    workers: int,
+    stochastic: bool = False,
 ) -> dict:
     """The evaluation of ``policy`` on ``task``, reusing a stored one of the same size."""
     from rlfd_drake.evaluate import evaluate, result_from_json, write_evaluation
@@ -212,7 +242,14 @@ def _evaluation(
             return stored
     print(f"  evaluating {name} ({episodes} episodes)", flush=True)
     result = evaluate(
-        task, policy, episodes, seed, workers=workers, residual_mode=mode, progress=False
+        task,
+        policy,
+        episodes,
+        seed,
+        workers=workers,
+        residual_mode=mode,
+        progress=False,
+        deterministic=not stochastic,
     )
     write_evaluation(result, name)
     return result
@@ -227,9 +264,9 @@ def _cell(row: Row, task: str, budget: str, seed: int, workers: int) -> dict:
         policy, label, trained = "dmp", "dmp", None
     elif kind == "random":
         policy, label, trained = "random", "random", None
-    elif kind == "shipped":
-        policy = str(models_dir() / SHIPPED_POLICY)
-        label, trained = Path(SHIPPED_POLICY).stem, 700
+    elif kind == "policy":
+        policy = str(models_dir() / detail)
+        label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
     elif kind == "baseline":
         train_task = row.train_task or task
         run = _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
@@ -237,8 +274,11 @@ def _cell(row: Row, task: str, budget: str, seed: int, workers: int) -> dict:
     else:
         raise ValueError(f"row {row.label!r} has an unknown source {row.source!r}")
     mode = "" if row.residual_mode == "full" else f"_{row.residual_mode}"
+    mode += "_stochastic" if row.stochastic else ""
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
-    result = _evaluation(task, policy, name, row.residual_mode, eval_episodes, seed, workers)
+    result = _evaluation(
+        task, policy, name, row.residual_mode, eval_episodes, seed, workers, row.stochastic
+    )
     return {
         "status": "measured",
         "success_pct": 100 * result["success_rate"],

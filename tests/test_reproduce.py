@@ -9,7 +9,7 @@ import pytest
 import rlfd_drake.reproduce as reproduce
 
 
-def _fake_evaluation(task, policy, name, mode, episodes, seed, workers):
+def _fake_evaluation(task, policy, name, mode, episodes, seed, workers, stochastic=False):
     rate = {"dmp": 0.5, "random": 0.6}.get(policy, 0.7)
     return {
         "success_rate": rate,
@@ -50,11 +50,11 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
-    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
-    sac = next(row for row in data["rows"] if row["label"] == "rLfD SAC")
-    assert sac["ours"]["easy"]["status"] == "not run"
-    markdown = (tmp_path / "results" / "table_2.md").read_text()
-    assert "Not run: deep-RL training per row" in markdown
+    data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    ppo = next(row for row in data["rows"] if row["label"] == "PPO / None")
+    assert ppo["ours"]["peg"]["status"] == "not run"
+    markdown = (tmp_path / "results" / "table_4.md").read_text()
+    assert "Not run: " in markdown and "deep-RL training per row" in markdown
 
 
 @pytest.mark.parametrize(("table", "budget"), [("9", "quick"), ("1", "huge")])

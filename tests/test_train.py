@@ -81,6 +81,24 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
         train(config, run, progress_bar=False)
 
 
+def test_exported_policy_acts_the_same_and_is_smaller(tmp_path):
+    from rlfd_drake.policies import export_policy
+
+    config = TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=4)
+    model = make_model(config, fast_venv(), None)
+    model.learn(total_timesteps=8)  # the optimizers now hold moment estimates
+    model.save(tmp_path / "policy.zip")
+    exported = export_policy(tmp_path / "policy.zip", tmp_path / "deploy.zip")
+    assert exported.stat().st_size < 0.8 * (tmp_path / "policy.zip").stat().st_size
+    obs = np.random.default_rng(2).normal(size=(8, 26)).astype(np.float32)
+    np.testing.assert_array_equal(
+        model.predict(obs, deterministic=True)[0],
+        load_model(exported).predict(obs, deterministic=True)[0],
+    )
+    with pytest.raises(FileExistsError, match="deploy.zip exists"):
+        export_policy(tmp_path / "policy.zip", exported)
+
+
 def test_sac_target_entropy_reaches_the_model():
     default = make_model(TrainConfig(algo="sac", envs=1, history=1), fast_venv(), None)
     assert default.target_entropy == -6.0  # SB3's -dim(A)
