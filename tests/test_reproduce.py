@@ -55,6 +55,32 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
     assert ppo["ours"]["peg"]["status"] == "not run"
     markdown = (tmp_path / "results" / "table_4.md").read_text()
     assert "Not run: " in markdown and "deep-RL training per row" in markdown
+    # A trained run folder is evaluated; a missing one says how to train it.
+    sac = next(row for row in data["rows"] if row["label"] == "SAC / SAC (rLfD), mean action")
+    assert "rlfd train --task peg --algo sac" in sac["ours"]["peg"]["reason"]
+
+
+def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    run = tmp_path / "runs" / "gear_sac_te1_s0"
+    run.mkdir(parents=True)
+    (run / "policy.zip").write_bytes(b"")
+    (run / "metrics.json").write_text(json.dumps({"episodes": 500}))
+    names = []
+
+    def recording(*args):
+        names.append(args[2])
+        return _fake_evaluation(*args)
+
+    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    rows = {row["label"]: row["ours"] for row in data["rows"]}
+    assert rows["SAC / SAC (rLfD), mean action"]["gear"]["training_episodes"] == 500
+    assert rows["SAC / SAC (rLfD), mean action"]["peg"]["status"] == "not run"
+    assert "eval_gear_gear_sac_te1_s0_stochastic_n40_s0" in names
 
 
 @pytest.mark.parametrize(("table", "budget"), [("9", "quick"), ("1", "huge")])
