@@ -10,6 +10,11 @@ evaluation grid (an existing ``results/eval_*`` file of the same episodes and se
 reused) and writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the
 paper's numbers and ours.
 
+Tables: 1, 2 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
+insertion times) and ``forces`` (peak contact forces of Tables I and II's rows); 5 and
+``forces`` reuse the other tables' evaluations. Table IV's rLfD rows evaluate a SAC
+residual trained per task by ``rlfd train`` when its run folder exists.
+
 Budgets: ``quick`` trains each episodic baseline for 100 episodes and evaluates 40
 starts per task (about an hour on 2 cores for tables 1, 2 and 4); ``paper`` uses 500
 training episodes (the paper: 8000 for eNAC/FDG/PoWER, cut to what fits in a working
