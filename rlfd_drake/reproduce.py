@@ -357,17 +357,22 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
     ]
     for row in table.rows:
         parts = [row.label]
-        trained = "n/a"
+        trained: list[str] = []
         for column in columns:
             paper = row.paper.get(column)
             cell = cells[row.label][column]
             parts.append("n/a" if paper is None else f"{paper:.1f}")
             if cell["status"] == "measured":
                 parts.append(_format_metric(cell, table.metric))
-                trained = cell["training_episodes"] or "n/a"
+                trained.append(str(cell["training_episodes"] or "n/a"))
             else:
                 parts.append("not run")
-        parts.append(str(trained))
+        # One figure when every column's policy trained as long, else one per column.
+        parts.append(
+            "/".join(dict.fromkeys(trained)) if len(set(trained)) <= 1 else "/".join(trained)
+        )
+        if not trained:
+            parts[-1] = "n/a"
         lines.append("| " + " | ".join(parts) + " |")
     reasons = {
         cell["reason"]
