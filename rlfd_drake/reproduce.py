@@ -367,12 +367,8 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
                 trained.append(str(cell["training_episodes"] or "n/a"))
             else:
                 parts.append("not run")
-        # One figure when every column's policy trained as long, else one per column.
-        parts.append(
-            "/".join(dict.fromkeys(trained)) if len(set(trained)) <= 1 else "/".join(trained)
-        )
-        if not trained:
-            parts[-1] = "n/a"
+        # One figure when every column's policy trained as long, else one per distinct value.
+        parts.append("/".join(dict.fromkeys(trained)) or "n/a")
         lines.append("| " + " | ".join(parts) + " |")
     reasons = {
         cell["reason"]

@@ -31,13 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from rlfd_drake.baselines.checks import check_positive_int
+
 __all__ = ["EpisodicNaturalActorCritic"]
-
-
-def _check_positive_int(name: str, value) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
 
 
 class EpisodicNaturalActorCritic:
@@ -82,8 +78,8 @@ class EpisodicNaturalActorCritic:
         theta0: np.ndarray | None = None,
         deterministic: bool = False,
     ):
-        self.n_features = _check_positive_int("n_features", n_features)
-        self.n_outputs = _check_positive_int("n_outputs", n_outputs)
+        self.n_features = check_positive_int("n_features", n_features)
+        self.n_outputs = check_positive_int("n_outputs", n_outputs)
         if not (np.isfinite(sigma) and sigma > 0.0):
             raise ValueError(f"sigma must be > 0, got {sigma!r}")
         if not (np.isfinite(learning_rate) and learning_rate > 0.0):
@@ -91,7 +87,7 @@ class EpisodicNaturalActorCritic:
         n_parameters = self.n_features * self.n_outputs
         if episodes_per_update is None:
             episodes_per_update = 2 * (n_parameters + 1)
-        self.episodes_per_update = _check_positive_int("episodes_per_update", episodes_per_update)
+        self.episodes_per_update = check_positive_int("episodes_per_update", episodes_per_update)
         self.sigma = float(sigma)
         self.learning_rate = float(learning_rate)
         self.normalize_step = normalize_step

@@ -35,16 +35,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from rlfd_drake.baselines.checks import as_parameter_vector
+
 __all__ = ["FiniteDifferenceGradient"]
-
-
-def _as_parameter_vector(name: str, value) -> np.ndarray:
-    array = np.array(value, dtype=float)
-    if array.ndim != 1 or array.size == 0:
-        raise ValueError(f"{name} must be a non-empty 1-D array, got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {array}")
-    return array
 
 
 class FiniteDifferenceGradient:
@@ -85,7 +78,7 @@ class FiniteDifferenceGradient:
         fit_reference: bool = False,
         seed: int = 0,
     ):
-        self.theta = _as_parameter_vector("theta0", theta0)
+        self.theta = as_parameter_vector("theta0", theta0)
         n = self.theta.size
         sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
         if not np.all(np.isfinite(sigma) & (sigma > 0.0)):
@@ -150,7 +143,7 @@ class FiniteDifferenceGradient:
 
     def tell(self, theta_sampled, return_: float) -> None:
         """Report the return of a rollout handed out by ``ask`` in this iteration."""
-        theta_sampled = _as_parameter_vector("theta_sampled", theta_sampled)
+        theta_sampled = as_parameter_vector("theta_sampled", theta_sampled)
         if theta_sampled.shape != self.theta.shape:
             raise ValueError(
                 f"theta_sampled must have shape {self.theta.shape}, got {theta_sampled.shape}"

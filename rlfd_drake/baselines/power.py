@@ -33,16 +33,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from rlfd_drake.baselines.checks import as_parameter_vector
+
 __all__ = ["PoWER"]
-
-
-def _as_parameter_vector(name: str, value) -> np.ndarray:
-    array = np.array(value, dtype=float)
-    if array.ndim != 1 or array.size == 0:
-        raise ValueError(f"{name} must be a non-empty 1-D array, got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {array}")
-    return array
 
 
 class PoWER:
@@ -72,7 +65,7 @@ class PoWER:
         adapt_variance: bool = False,
         min_sigma: float = 1e-4,
     ):
-        self.theta = _as_parameter_vector("theta0", theta0)
+        self.theta = as_parameter_vector("theta0", theta0)
         n = self.theta.size
         sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
         if not np.all(np.isfinite(sigma) & (sigma > 0.0)):
@@ -104,7 +97,7 @@ class PoWER:
 
     def tell(self, theta_sampled, return_: float) -> None:
         """Report the return (>= 0) of a rollout of ``theta_sampled`` and update ``theta``."""
-        theta_sampled = _as_parameter_vector("theta_sampled", theta_sampled)
+        theta_sampled = as_parameter_vector("theta_sampled", theta_sampled)
         if theta_sampled.shape != self.theta.shape:
             raise ValueError(
                 f"theta_sampled must have shape {self.theta.shape}, got {theta_sampled.shape}"

@@ -50,17 +50,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rlfd_drake.baselines.checks import check_positive_int
+
 __all__ = ["LinearPolicyConfig", "LinearResidualPolicy", "RecursiveLeastSquares"]
 
 # The residual action: translation (0:3) and rotation vector (3:6), as
 # rlfd_drake.diagram.RESIDUAL_SIZE; repeated here so this module never imports pydrake.
 RESIDUAL_SIZE = 6
-
-
-def _check_positive_int(name: str, value: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
 
 
 def _check_forgetting(name: str, value: float) -> float:
@@ -109,8 +105,8 @@ class RecursiveLeastSquares:
         theta0: np.ndarray | None = None,
         max_covariance_trace: float | None = None,
     ):
-        self.n_features = _check_positive_int("n_features", n_features)
-        self.n_outputs = _check_positive_int("n_outputs", n_outputs)
+        self.n_features = check_positive_int("n_features", n_features)
+        self.n_outputs = check_positive_int("n_outputs", n_outputs)
         self.forgetting_factor = _check_forgetting("forgetting_factor", forgetting_factor)
         if not (np.isfinite(delta) and delta > 0.0):
             raise ValueError(f"delta must be > 0, got {delta!r}")
@@ -273,7 +269,7 @@ class LinearResidualPolicy:
         seed: int = 0,
         deterministic: bool = False,
     ):
-        self.observation_size = _check_positive_int("observation_size", observation_size)
+        self.observation_size = check_positive_int("observation_size", observation_size)
         self.config = LinearPolicyConfig() if config is None else config
         indices = self.config.observation_indices
         if indices is None:
