@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rlfd_drake.control_math import COMPOSITIONS
+
 
 def _print_json(data: dict) -> None:
     print(json.dumps(data, indent=2))
@@ -288,6 +290,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
         curriculum=args.curriculum,
         eval_every_episodes=args.eval_every,
         sac_target_entropy=args.sac_target_entropy,
+        log_std_init=args.log_std_init,
+        sac_learning_starts=args.sac_learning_starts,
+        composition=args.composition,
+        init_from=args.init_from,
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -341,6 +347,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         grid=not args.random_starts,
         residual_mode=args.residual_mode,
         deterministic=not args.stochastic,
+        composition=args.composition,
     )
     mode = "_stochastic" if args.stochastic else ""
     policy_path = Path(args.policy)
@@ -429,6 +436,28 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="SAC: entropy the tuning holds (default SB3's -6; +1 keeps a ~0.3 std jiggle)",
     )
+    train.add_argument(
+        "--sac-learning-starts",
+        type=int,
+        default=0,
+        help="SAC: steps explored with the initial policy before the first update",
+    )
+    train.add_argument(
+        "--log-std-init",
+        type=float,
+        default=-1.5,
+        help="initial log std of the policy's Gaussian (-1.5: a std of 0.22 of the "
+        "residual's range; RJ-45's 30 N limit needs smaller, e.g. -3)",
+    )
+    train.add_argument(
+        "--composition",
+        choices=list(COMPOSITIONS),
+        default="residual",
+        help="residual (rLfD) | hybrid (DMP, then velocity commands) | pure (no DMP)",
+    )
+    train.add_argument(
+        "--init-from", help="start from this saved policy's networks (transfer, Table VI)"
+    )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")
     train.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -485,6 +514,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument(
         "--stochastic", action="store_true", help="sample the policy's actions (seeded)"
+    )
+    evaluate.add_argument(
+        "--composition",
+        choices=list(COMPOSITIONS),
+        default="residual",
+        help="how the policy was trained to act (see rlfd train --composition)",
     )
     evaluate.add_argument("--name", help="results file stem")
     evaluate.add_argument("--json", action="store_true", help="print the JSON result")

@@ -222,6 +222,12 @@ def so3_left_jacobian_inverse(r: np.ndarray) -> np.ndarray:
 
 RESIDUAL_MODES: tuple[str, ...] = ("full", "translation", "orientation", "off")
 
+#: How the policy's action sets the set-point: "residual" (rLfD: added to the DMP's),
+#: "hybrid" (the DMP until the activation time, then the action is a velocity command
+#: from where the DMP was) or "pure" (velocity commands from the start, no DMP): the
+#: paper's Table III.
+COMPOSITIONS: tuple[str, ...] = ("residual", "hybrid", "pure")
+
 
 def scale_residual(
     residual: np.ndarray, max_translation_m: float, max_rotation_rad: float, mode: str = "full"

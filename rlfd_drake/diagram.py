@@ -24,6 +24,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Gain, LogVectorOutput, PassThrough, VectorLogSink
 
+from rlfd_drake.control_math import COMPOSITIONS
 from rlfd_drake.dmp import CartesianDmp
 from rlfd_drake.scene import AddRlfdScene, Scene, SceneConfig, SolvePandaIK
 from rlfd_drake.systems.composer import ResidualComposer, ResidualComposerConfig
@@ -37,6 +38,7 @@ from rlfd_drake.systems.impedance import (
 from rlfd_drake.systems.observer import OBSERVATION_SIZE, Observer, ObserverConfig
 from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
 from rlfd_drake.systems.setpoint_triad import SetpointTriad
+from rlfd_drake.systems.velocity_command import VelocityCommandConfig, VelocityCommandSetpoint
 from rlfd_drake.tasks import TaskSpec
 from rlfd_drake.view import (
     BASE_SETPOINT_PATH,
@@ -60,14 +62,19 @@ class RlfdDiagramConfig:
         impedance: Cartesian impedance controller (500 Hz).
         extrapolator: quintic extrapolation of the DMP set-points.
         residual_mode: "full", "translation", "orientation" or "off".
-        max_translation_m, max_rotation_rad: physical bounds of a residual of 1 (1 cm,
-            5 deg: a few times the fixture calibration errors; larger bounds make
-            early exploration knock the part off a hole it would have found).
+        max_translation_m, max_rotation_rad: physical bounds of a residual of 1; None
+            = the task's (``residual_max_translation_m`` / ``_rotation_rad``: 1 cm and
+            0.087 rad (5 deg) for the pegs and the gear, a few times the fixture calibration
+            errors; larger bounds make early exploration knock the part off a hole it
+            would have found).
         residual_activation_s: when the residual starts acting; None = the task's
             (5 s: the paper's simulated half-episode).
         residual_period_s: residual policy period (10 Hz).
         log_period_s: period of the episode logs; None = no logs (training, where
             nobody reads them).
+        composition: one of ``COMPOSITIONS``.
+        max_speed_m_s, max_angular_speed_rad_s: velocity of an action of 1 for the
+            "hybrid" and "pure" compositions (5 cm/s, 20 deg/s).
     """
 
     scene: SceneConfig = field(default_factory=SceneConfig)
@@ -75,11 +82,14 @@ class RlfdDiagramConfig:
     impedance: CartesianImpedanceConfig = field(default_factory=CartesianImpedanceConfig)
     extrapolator: QuinticExtrapolatorConfig = field(default_factory=QuinticExtrapolatorConfig)
     residual_mode: str = "full"
-    max_translation_m: float = 0.01
-    max_rotation_rad: float = 0.087
+    max_translation_m: float | None = None
+    max_rotation_rad: float | None = None
     residual_activation_s: float | None = None
     residual_period_s: float = 0.1
     log_period_s: float | None = 0.01
+    composition: str = "residual"
+    max_speed_m_s: float = 0.05
+    max_angular_speed_rad_s: float = 0.35
 
     def __post_init__(self) -> None:
         for name in ("dmp_period_s", "residual_period_s", "log_period_s"):
@@ -93,6 +103,26 @@ class RlfdDiagramConfig:
                 "residual_mode must be one of full, translation, orientation, off; "
                 f"got {self.residual_mode!r}"
             )
+        for name in ("max_translation_m", "max_rotation_rad"):
+            value = getattr(self, name)
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number or None, got {value}")
+        if self.composition not in COMPOSITIONS:
+            raise ValueError(f"composition must be one of {COMPOSITIONS}, got {self.composition!r}")
+
+    def residual_bounds(self, task: TaskSpec) -> tuple[float, float]:
+        """(m, rad) of a residual action of 1 on ``task``: this config's or the task's."""
+        translation = (
+            task.residual_max_translation_m
+            if self.max_translation_m is None
+            else self.max_translation_m
+        )
+        rotation = (
+            task.residual_max_rotation_rad
+            if self.max_rotation_rad is None
+            else self.max_rotation_rad
+        )
+        return float(translation), float(rotation)
 
 
 @dataclass
@@ -105,7 +135,7 @@ class RlfdDiagram:
     config: RlfdDiagramConfig
     dmp: DmpSystem
     extrapolator: QuinticExtrapolator
-    composer: ResidualComposer
+    composer: ResidualComposer | VelocityCommandSetpoint
     controller: CartesianImpedanceController
     observer: Observer
     residual_policy: ResidualPolicy | None
@@ -188,17 +218,27 @@ def BuildRlfdDiagram(
         if config.residual_activation_s is None
         else config.residual_activation_s
     )
-    composer = builder.AddNamedSystem(
-        "composer",
-        ResidualComposer(
+    max_translation_m, max_rotation_rad = config.residual_bounds(task)
+    if config.composition == "residual":
+        composer = ResidualComposer(
             ResidualComposerConfig(
-                max_translation_m=config.max_translation_m,
-                max_rotation_rad=config.max_rotation_rad,
+                max_translation_m=max_translation_m,
+                max_rotation_rad=max_rotation_rad,
                 mode=config.residual_mode,
                 activation_time_s=activation,
             )
-        ),
-    )
+        )
+    else:
+        composer = VelocityCommandSetpoint(
+            VelocityCommandConfig(
+                max_speed_m_s=config.max_speed_m_s,
+                max_angular_speed_rad_s=config.max_angular_speed_rad_s,
+                mode=config.residual_mode,
+                activation_time_s=0.0 if config.composition == "pure" else activation,
+                period_s=config.impedance.period_s,
+            )
+        )
+    composer = builder.AddNamedSystem("composer", composer)
     observer = builder.AddNamedSystem(
         "observer",
         Observer(
@@ -265,7 +305,7 @@ def BuildRlfdDiagram(
             ),
         )
         rest_gain = dmp_model.config.alpha_z * dmp_model.config.beta_z
-        scale = np.array([config.max_translation_m] * 3 + [config.max_rotation_rad] * 3) * rest_gain
+        scale = np.array([max_translation_m] * 3 + [max_rotation_rad] * 3) * rest_gain
         coupling_gain = builder.AddNamedSystem("coupling_scale", Gain(scale))
         connect(observer.GetOutputPort("observation"), coupling.GetInputPort("observation"))
         connect(coupling.GetOutputPort("residual"), coupling_gain.get_input_port())

@@ -125,7 +125,10 @@ class RlfdEnv(DrakeGymEnv):
     ## Arguments
     ``task`` (name or TaskSpec), ``reward`` ("sparse" | "dense"), ``residual_mode``
     ("full" | "translation" | "orientation"), ``perturbation_scale`` (0..1),
-    ``diagram_config`` (RlfdDiagramConfig), ``render_mode`` (None | "ansi" | "human":
+    ``composition`` ("residual": rLfD; "hybrid" or "pure": the action is a velocity
+    command that moves the set-point, from the DMP's pose at the activation time or
+    from the start with no DMP: the paper's Table III baselines; "pure" acts for the
+    whole 10 s), ``diagram_config`` (RlfdDiagramConfig), ``render_mode`` (None | "ansi" | "human":
     Meshcat), ``info_handler`` (callable(simulator) -> dict merged into ``info``).
     """
 
@@ -140,11 +143,13 @@ class RlfdEnv(DrakeGymEnv):
         diagram_config: RlfdDiagramConfig | None = None,
         render_mode: str | None = None,
         info_handler=None,
+        composition: str = "residual",
     ) -> None:
         self._init_args = dict(
             task=task,
             reward=reward,
             residual_mode=residual_mode,
+            composition=composition,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -166,7 +171,12 @@ class RlfdEnv(DrakeGymEnv):
             )
         # No episode logs: the env reads ports, and the loggers cost time every step.
         self.diagram_config = RlfdDiagramConfig(
-            **{**config.__dict__, "residual_mode": residual_mode, "log_period_s": None}
+            **{
+                **config.__dict__,
+                "residual_mode": residual_mode,
+                "composition": composition,
+                "log_period_s": None,
+            }
         )
         self.dmp_model = load_task_dmp(self.task)
         self._X_WP_demo_start = demo_start_pose(self.dmp_model)

@@ -246,6 +246,7 @@ def evaluate(
     diagram_config: RlfdDiagramConfig | None = None,
     progress: bool = True,
     deterministic: bool = True,
+    composition: str = "residual",
 ) -> dict:
     """Evaluates a policy on ``episodes`` starts of a task.
 
@@ -262,6 +263,9 @@ def evaluate(
         progress: show a tqdm progress bar.
         deterministic: a trained policy acts with its mean (True) or samples from its
             Gaussian, seeded per episode (False).
+        composition: how the action sets the set-point (``diagram.COMPOSITIONS``:
+            "residual" for rLfD, "hybrid" / "pure" for policies trained that way);
+            replaces ``diagram_config``'s.
 
     Returns:
         A JSON-serialisable dict with :data:`RESULT_KEYS`: ``success_rate`` (0..1),
@@ -283,6 +287,7 @@ def evaluate(
     config = replace(
         diagram_config if diagram_config is not None else RlfdDiagramConfig(),
         residual_mode=residual_mode,
+        composition=composition,
     )
     specs = make_episode_specs(task, episodes, seed, grid)
     episode_seeds = np.random.SeedSequence([seed, 1]).generate_state(episodes).tolist()
@@ -321,6 +326,7 @@ def evaluate(
         "task": task.name,
         "policy": policy_spec,
         "residual_mode": residual_mode,
+        "composition": composition,
         "deterministic": deterministic,
         "seed": seed,
         "grid": grid,

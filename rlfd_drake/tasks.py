@@ -231,6 +231,10 @@ class TaskSpec:
         episode_time_s: episode length, s (paper: 10 s).
         residual_activation_s: time at which the residual starts acting, s (paper,
             simulation: half the episode).
+        residual_max_translation_m, residual_max_rotation_rad: what a residual action
+            of 1 means for this task (m, rad): a few times its fixture error, so the
+            policy's range and its exploration are on the scale of what it must
+            correct (RJ-45's 30 N limit breaks under a 1 cm jiggle).
     """
 
     name: str
@@ -247,6 +251,8 @@ class TaskSpec:
     force_limit_n: float | None = None
     episode_time_s: float = 10.0
     residual_activation_s: float = 5.0
+    residual_max_translation_m: float = 0.01
+    residual_max_rotation_rad: float = 0.087
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -429,6 +435,8 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.force_limit_n, "force_limit_n")
     _positive(task.episode_time_s, "episode_time_s")
     _positive(task.residual_activation_s, "residual_activation_s", allow_zero=True)
+    _positive(task.residual_max_translation_m, "residual_max_translation_m")
+    _positive(task.residual_max_rotation_rad, "residual_max_rotation_rad")
     if task.residual_activation_s > task.episode_time_s:
         raise ValueError(
             f"residual_activation_s = {task.residual_activation_s} is after the episode end "

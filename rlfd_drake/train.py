@@ -35,6 +35,7 @@ from stable_baselines3.common.callbacks import (
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
+from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import ENV_IDS, RlfdEnv
 from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import invoked_command
@@ -66,14 +67,18 @@ class TrainConfig:
             jiggle around the DMP rather than uniform noise over the residual's range.
         learning_rate: optimiser step size.
         ppo_n_steps: PPO rollout length per env between updates.
-        sac_learning_starts: SAC steps before its first update (SB3 samples those
-            uniformly over the action space, which here means large random residuals).
+        sac_learning_starts: SAC steps before its first update, explored with the
+            initial (zero-mean) policy (see ResidualSAC).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
             coefficient.
         sac_target_entropy: the entropy SAC's coefficient tuning holds the policy at;
             None = SB3's -dim(A) = -6, i.e. a pre-squashing std of about 0.09 per axis
             (sub-millimetre jiggle). Each +6 multiplies that std by e: +1 keeps it
             near 0.3, the jiggle that finds a hole (paper Sec. I).
+        composition: "residual" (rLfD), "hybrid" or "pure" (the paper's Table III
+            baselines; see ``diagram.COMPOSITIONS``).
+        init_from: a saved policy (.zip) of the same algorithm whose networks start
+            this run (transfer, Table VI); None = a new zero-output policy.
     """
 
     task: str = "peg_easy"
@@ -95,6 +100,8 @@ class TrainConfig:
     sac_learning_starts: int = 0
     sac_initial_ent_coef: float = 0.01
     sac_target_entropy: float | None = None
+    composition: str = "residual"
+    init_from: str | None = None
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -111,16 +118,29 @@ class TrainConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.sac_learning_starts < 0:
+            raise ValueError(f"sac_learning_starts must be >= 0, got {self.sac_learning_starts}")
         if self.eval_every_episodes < 0:
             raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
         if self.sac_target_entropy is not None and not np.isfinite(self.sac_target_entropy):
             raise ValueError(f"sac_target_entropy must be finite, got {self.sac_target_entropy}")
+        if not np.isfinite(self.log_std_init):
+            raise ValueError(f"log_std_init must be finite, got {self.log_std_init}")
+        if self.composition not in COMPOSITIONS:
+            raise ValueError(f"composition must be one of {COMPOSITIONS}, got {self.composition!r}")
+        if self.init_from is not None and not Path(self.init_from).is_file():
+            raise ValueError(f"init_from must be a saved policy file, got {self.init_from!r}")
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
-    return {"task": config.task, "reward": config.reward, "residual_mode": config.residual_mode}
+    return {
+        "task": config.task,
+        "reward": config.reward,
+        "residual_mode": config.residual_mode,
+        "composition": config.composition,
+    }
 
 
 def make_envs(config: TrainConfig, n_envs: int, seed: int):
@@ -138,6 +158,19 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
     if config.algo == "sac" and config.history > 1:
         venv = VecFrameStack(venv, n_stack=config.history)
     return venv
+
+
+class ResidualSAC(SAC):
+    """SAC whose warm-up (``learning_starts``) explores with its own policy -- the zero
+    residual plus its small Gaussian jiggle, i.e. the DMP -- instead of SB3's uniform
+    samples over [-1, 1] (full-range residuals). The critic then first sees what the
+    DMP achieves, successes included, before the actor moves: on RJ-45, where most
+    failures end early at the force limit, updating from the first step let the actor
+    drift on a critic fitted to zeros (2 successes in 63 episodes against the DMP's
+    ~30%). Saved models load as plain SAC."""
+
+    def _sample_action(self, learning_starts, action_noise=None, n_envs=1):
+        return super()._sample_action(0, action_noise, n_envs)
 
 
 def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
@@ -182,7 +215,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
     elif config.algo == "sac":
         # Paper: actor 400-300 ReLU, critic one layer of 300; memory through the stacked
         # observation history (SB3 has no recurrent SAC).
-        model = SAC(
+        model = ResidualSAC(
             "MlpPolicy",
             buffer_size=100_000,
             batch_size=128,
@@ -214,6 +247,35 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
         )
     zero_residual_output(model, config.log_std_init)
     return model
+
+
+def copy_policy_parameters(source: BaseAlgorithm, target: BaseAlgorithm) -> None:
+    """Starts ``target`` from ``source``'s networks (and SAC's entropy coefficient):
+    fine-tuning a residual trained on another task (transfer, paper Table VI). The
+    optimisers and the replay buffer start afresh.
+
+    Raises:
+        ValueError: the two are different algorithms or their networks differ in shape
+            (e.g. another observation history or action size).
+    """
+    if type(source.policy) is not type(target.policy):  # SAC and ResidualSAC share one
+        raise ValueError(
+            f"init_from is a {type(source).__name__} policy, this run trains "
+            f"{type(target).__name__}"
+        )
+    source_state = source.policy.state_dict()
+    target_state = target.policy.state_dict()
+    mismatched = [
+        name
+        for name, value in target_state.items()
+        if name not in source_state or source_state[name].shape != value.shape
+    ]
+    if mismatched:
+        raise ValueError(f"init_from's networks do not match this run's: {mismatched[:4]}")
+    target.policy.load_state_dict(source_state)
+    if getattr(source, "log_ent_coef", None) is not None and target.log_ent_coef is not None:
+        with torch.no_grad():
+            target.log_ent_coef.copy_(source.log_ent_coef.detach())
 
 
 def load_model(path: str | Path) -> BaseAlgorithm:
@@ -309,7 +371,8 @@ def train(
         )
     run_dir.mkdir(parents=True, exist_ok=True)
     if resume and config_path.exists():
-        saved = json.loads(config_path.read_text())["config"]
+        # Fields added since the run started take their defaults.
+        saved = {**asdict(TrainConfig()), **json.loads(config_path.read_text())["config"]}
         if saved != asdict(config):
             raise ValueError(
                 f"--resume with a different configuration than {config_path}: "
@@ -329,6 +392,8 @@ def train(
         model = type(load_model(checkpoint)).load(str(checkpoint), env=venv, device="cpu")
     else:
         model = make_model(config, venv, run_dir / "tb")
+        if config.init_from is not None:
+            copy_policy_parameters(load_model(config.init_from), model)
 
     steps_per_episode = 50
     callbacks: list[BaseCallback] = [

@@ -23,16 +23,6 @@ from rlfd_drake.evaluate import evaluate
 from rlfd_drake.tasks import load_task
 
 
-@pytest.fixture(scope="module")
-def peg_easy():
-    return load_task("peg_easy")
-
-
-@pytest.fixture(scope="module")
-def dmp(peg_easy):
-    return load_task_dmp(peg_easy)
-
-
 def _result(success: bool, insertion_time_s: float) -> EpisodeResult:
     return EpisodeResult(
         success=success,
@@ -104,7 +94,8 @@ def test_unit_coupling_moves_the_dmp_rest_point_by_the_residual_bound(peg_easy, 
             rlfd.dmp.GetMyContextFromRoot(context)
         )[:3]
     shift = ends["unit_x"] - ends["zero"]
-    np.testing.assert_allclose(shift, [config.max_translation_m, 0.0, 0.0], atol=1e-3)
+    bound = config.residual_bounds(peg_easy)[0]
+    np.testing.assert_allclose(shift, [bound, 0.0, 0.0], atol=1e-3)
 
 
 def test_linear_baseline_trains_saves_and_evaluates(tmp_path, peg_easy, dmp):

@@ -209,4 +209,6 @@ def test_policy_inside_the_diagram_acts_at_10_hz(peg):
     before, after = t < 0.5, t >= 0.5
     np.testing.assert_array_equal(X_desired[:, before], X_base[:, before])
     dp = X_desired[:3, after] - X_base[:3, after]
-    np.testing.assert_allclose(dp, config.max_translation_m * residual[:3, after], atol=1e-12)
+    np.testing.assert_allclose(
+        dp, config.residual_bounds(task)[0] * residual[:3, after], atol=1e-12
+    )

@@ -183,3 +183,21 @@ def test_sparse_reward_is_one_exactly_on_the_successful_step():
         done = terminated or truncated
     assert terminated and info["success"]
     assert rewards[-1] == 1.0 and set(rewards[:-1]) <= {0.0}
+
+
+def test_pure_composition_acts_from_the_start_and_moves_the_setpoint():
+    """The pure-RL baseline (Table III): no DMP phase in reset, the action is a velocity
+    command, and the dense reward rises as the part approaches the goal."""
+    env = RlfdEnv("peg_easy", composition="pure", reward="dense")
+    _, info = env.reset(seed=0)
+    assert info["time_s"] == 0.0
+    X0 = env._port("X_WE_desired").copy()
+    _, reward_still, *_ = env.step(np.zeros(6, np.float32))
+    np.testing.assert_array_equal(env._port("X_WE_desired"), X0)  # no DMP motion
+    _, _, _, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+    moved = env._port("X_WE_desired")[:3] - X0[:3]
+    # One 0.1 s step at the full 5 cm/s along x.
+    np.testing.assert_allclose(moved, [0.005, 0.0, 0.0], atol=1e-9)
+    assert np.isfinite(reward_still) and reward_still < 0.0
+    with pytest.raises(ValueError, match="composition"):
+        RlfdEnv("peg_easy", composition="mixed")

@@ -22,16 +22,6 @@ from rlfd_drake.tasks import load_task
 
 
 @pytest.fixture(scope="module")
-def peg_easy():
-    return load_task("peg_easy")
-
-
-@pytest.fixture(scope="module")
-def dmp(peg_easy):
-    return load_task_dmp(peg_easy)
-
-
-@pytest.fixture(scope="module")
 def nominal_result(peg_easy, dmp) -> EpisodeResult:
     """DMP alone from the demonstration start, no fixture error."""
     return run_episode(peg_easy, dmp, EpisodeSpec())

@@ -140,3 +140,43 @@ def test_deployed_policy_matches_the_frame_stacked_training_view():
         stacked, _, _, _ = venv.step(rng.uniform(-1, 1, (1, 6)).astype(np.float32))
     deployed.reset()
     np.testing.assert_array_equal(deployed._stack, 0.0)
+
+
+def test_init_from_starts_from_the_source_networks(tmp_path):
+    from rlfd_drake.train import copy_policy_parameters
+
+    source = make_model(TrainConfig(algo="sac", envs=1, history=1), fast_venv(), None)
+    with torch.no_grad():
+        for p in source.policy.parameters():
+            p.add_(torch.randn_like(p))
+        source.log_ent_coef.fill_(-1.0)
+    path = tmp_path / "source.zip"
+    source.save(path)
+    config = TrainConfig(algo="sac", envs=1, history=1, init_from=str(path))
+    target = make_model(config, fast_venv(), None)
+    copy_policy_parameters(load_model(config.init_from), target)
+    for a, b in zip(source.policy.parameters(), target.policy.parameters(), strict=True):
+        assert torch.equal(a, b)
+    assert float(target.log_ent_coef.detach()) == -1.0
+    obs = np.random.default_rng(1).normal(size=(4, 26)).astype(np.float32)
+    np.testing.assert_array_equal(
+        source.predict(obs, deterministic=True)[0], target.predict(obs, deterministic=True)[0]
+    )
+    ppo = make_model(TrainConfig(algo="ppo", envs=1), fast_venv(), None)
+    with pytest.raises(ValueError, match="SAC policy, this run trains PPO"):
+        copy_policy_parameters(source, ppo)
+    with pytest.raises(ValueError, match="init_from"):
+        TrainConfig(init_from=str(tmp_path / "missing.zip"))
+    with pytest.raises(ValueError, match="composition"):
+        TrainConfig(composition="mixed")
+
+
+def test_sac_warm_up_explores_with_its_policy_not_uniform_samples():
+    """During learning_starts the residual is the zero-mean policy's jiggle (the DMP),
+    not SB3's uniform full-range actions."""
+    config = TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=1000, log_std_init=-3)
+    model = make_model(config, fast_venv(), None)
+    model._last_obs = np.zeros((1, 26), np.float32)
+    actions = np.array([model._sample_action(1000)[0] for _ in range(200)])
+    assert np.max(np.abs(actions)) < 0.3  # std 0.05; uniform would reach ~1
+    assert np.std(actions) > 0.01
