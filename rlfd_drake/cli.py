@@ -291,6 +291,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         eval_every_episodes=args.eval_every,
         sac_target_entropy=args.sac_target_entropy,
         log_std_init=args.log_std_init,
+        learning_rate=args.learning_rate,
         sac_learning_starts=args.sac_learning_starts,
         composition=args.composition,
         init_from=args.init_from,
@@ -436,6 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="SAC: entropy the tuning holds (default SB3's -6; +1 keeps a ~0.3 std jiggle)",
     )
+    train.add_argument("--learning-rate", type=float, default=3e-4, help="optimiser step size")
     train.add_argument(
         "--sac-learning-starts",
         type=int,
@@ -492,7 +494,9 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = sub.add_parser(
         "reproduce", help="measure the paper's tables (training what is missing)"
     )
-    reproduce.add_argument("--table", choices=["1", "2", "4", "5", "forces", "all"], default="all")
+    reproduce.add_argument(
+        "--table", choices=["1", "2", "3", "4", "5", "6", "forces", "all"], default="all"
+    )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
     reproduce.add_argument("--seed", type=int, default=0)
     reproduce.add_argument("--workers", type=int, default=2)

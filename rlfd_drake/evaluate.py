@@ -12,6 +12,9 @@ Policies are named by a string, so that worker processes can build their own:
   ``"td3:path"``, ``"recurrent_ppo:path"`` force the class), run deterministically.
 * a path to an episodic baseline ``baseline.npz`` (``rlfd baseline``: PoWER/FDG DMP
   weights, the eNAC coupling policy or the RLS linear residual), run with its mean.
+* ``"<translation spec>|<orientation spec>"``: Table IV's "translation policy /
+  orientation policy" rows, e.g. ``"runs/.../baseline.npz|random"`` (Linear / Random):
+  each part is any residual spec above ("dmp" = no correction of that part).
 """
 
 from __future__ import annotations
@@ -75,14 +78,40 @@ def make_policy(
     residual_mode: str = "full",
     episode_seed: int = 0,
     deterministic: bool = True,
+    task: TaskSpec | None = None,
+    dmp=None,
 ):
     """The residual policy of ``policy_spec`` for one episode (None for "dmp").
 
     ``episode_seed`` seeds the random baseline; a saved model is loaded once per
-    process and shared (its recurrent state is reset at every episode start).
+    process and shared (its recurrent state is reset at every episode start). A
+    baseline ``.npz`` is allowed here only as a part of a split spec (whole, it may
+    replace the DMP: see ``_init_worker``); ``task`` and ``dmp`` are then needed.
     """
+    if "|" in policy_spec:
+        from rlfd_drake.baselines.split import SplitResidualPolicy
+
+        parts = policy_spec.split("|")
+        if len(parts) != 2:
+            raise ValueError(f"a split policy is 'translation|orientation', got {policy_spec!r}")
+        return SplitResidualPolicy(
+            make_policy(parts[0], "translation", episode_seed, deterministic, task, dmp),
+            make_policy(parts[1], "orientation", episode_seed + 1, deterministic, task, dmp),
+        )
     if policy_spec == "dmp":
         return None
+    if policy_spec.endswith(".npz"):
+        from rlfd_drake.baselines.episodic import load_baseline
+
+        if task is None or dmp is None:
+            raise ValueError(f"{policy_spec}: a baseline needs the task and its DMP")
+        kit = load_baseline(policy_spec, task, dmp, seed=episode_seed)
+        if kit.policy is None or kit.coupling_policy is not None:
+            raise ValueError(
+                f"{policy_spec} changes the DMP, not the residual: it cannot be one part "
+                "of a translation|orientation policy"
+            )
+        return kit.policy
     if policy_spec == "random":
         from rlfd_drake.baselines.random_policy import RandomResidualPolicy
 
@@ -126,14 +155,15 @@ def _init_worker(
         deterministic=deterministic,
         kit=None,
     )
-    if policy_spec.endswith(".npz"):
+    if policy_spec.endswith(".npz") and "|" not in policy_spec:
         # An episodic baseline (rlfd baseline): it may replace the DMP or drive its
         # coupling term, so it is loaded as a kit rather than a residual policy.
         from rlfd_drake.baselines.episodic import load_baseline
 
         _WORKER["kit"] = load_baseline(policy_spec, task, _WORKER["dmp"])
     elif policy_spec not in ("dmp", "random"):
-        make_policy(policy_spec, residual_mode)  # load the model once, fail early
+        # Load the models once, fail early.
+        make_policy(policy_spec, residual_mode, task=task, dmp=_WORKER["dmp"])
 
 
 def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
@@ -150,7 +180,12 @@ def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
         )
         return index, result
     policy = make_policy(
-        _WORKER["policy_spec"], _WORKER["residual_mode"], episode_seed, _WORKER["deterministic"]
+        _WORKER["policy_spec"],
+        _WORKER["residual_mode"],
+        episode_seed,
+        _WORKER["deterministic"],
+        _WORKER["task"],
+        _WORKER["dmp"],
     )
     result = run_episode(
         _WORKER["task"], _WORKER["dmp"], spec, policy=policy, diagram_config=_WORKER["config"]
@@ -327,6 +362,7 @@ def evaluate(
         "policy": policy_spec,
         "residual_mode": residual_mode,
         "composition": composition,
+        "residual_bounds": list(config.residual_bounds(task)),
         "deterministic": deterministic,
         "seed": seed,
         "grid": grid,

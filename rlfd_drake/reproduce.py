@@ -10,17 +10,20 @@ evaluation grid (an existing ``results/eval_*`` file of the same episodes and se
 reused) and writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the
 paper's numbers and ours.
 
-Tables: 1, 2 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
-insertion times) and ``forces`` (peak contact forces of Tables I and II's rows); 5 and
-``forces`` reuse the other tables' evaluations. Table IV's rLfD rows evaluate a SAC
-residual trained per task by ``rlfd train`` when its run folder exists.
+Tables: 1, 2, 3 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
+insertion times), 6 (transfer between gear and RJ-45) and ``forces`` (peak contact
+forces of Tables I and II's rows); 5 and ``forces`` reuse the other tables'
+evaluations. Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC,
+Table VI's transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS``
+for the folders and the commands); a missing one is listed as "not run" with the
+command that trains it, since each takes 5-45 minutes on 2 cores.
 
 Budgets: ``quick`` trains each episodic baseline for 100 episodes and evaluates 40
 starts per task (about an hour on 2 cores for tables 1, 2 and 4); ``paper`` uses 500
 training episodes (the paper: 8000 for eNAC/FDG/PoWER, cut to what fits in a working
 day here) and 200 evaluation starts (the paper: 500 / 160). Rows this code cannot
-produce yet (deep-RL training per row, pure-RL and hybrid baselines, transfer) are
-listed with the paper's number and "not run" and the reason, never left out.
+produce (PPO per row) are listed with the paper's number and "not run" and the
+reason, never left out.
 """
 
 from __future__ import annotations
@@ -47,14 +50,20 @@ class Row:
     Attributes:
         label: the row's name (the paper's, plus what differs here).
         source: "dmp", "random", "policy:<file under models/>" (a shipped policy),
-            "run:<run folder, {task} filled in>" (a policy trained by ``rlfd train``;
-            not run, with the command to train it, if the folder has no policy yet),
+            "run:<key of RUNS>" (the policy of the column's task trained by ``rlfd
+            train``; not run, with the command to train it, if the folder has no
+            policy yet),
             "baseline:<method>" (trained per training task) or "none:<reason>" (not
             produced by this code yet).
         paper: the paper's success % per column (None where it reports none).
         residual_mode: composer mode of the evaluation (and of the linear baseline).
         train_task: task the baseline is trained on; None = each column's own task.
         stochastic: a trained policy samples its actions (seeded) instead of its mean.
+        composition: how the policy sets the set-point ("residual" = rLfD; "hybrid",
+            "pure": Table III's baselines).
+        orientation_source: if given ("random"), the orientation part of the residual
+            comes from it and the translation from ``source`` (Table IV's Linear /
+            Random); the evaluation then runs the full residual.
     """
 
     label: str
@@ -63,6 +72,8 @@ class Row:
     residual_mode: str = "full"
     train_task: str | None = None
     stochastic: bool = False
+    composition: str = "residual"
+    orientation_source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -80,11 +91,73 @@ class Table:
 _SIM = {"easy": "peg_easy", "hard": "peg_hard"}
 _PHYSICAL = {"peg": "peg", "gear": "gear", "rj45": "rj45"}
 _NO_DEEP_RL = "none:deep-RL training per row is not in the reproduction budget yet"
-#: A full-pose SAC residual trained per task by the command in the "not run" reason.
-_SAC_RUN = "runs/{task}_sac_te1_s0"
-_SAC_COMMAND = (
-    "rlfd train --task {task} --algo sac --episodes 500 --seed 0 --envs 2 "
-    "--sac-target-entropy 1.0 --out runs/{task}_sac_te1_s0"
+_SAC_PEG_RECIPE = "--sac-target-entropy 1.0"
+_SAC_RJ45_RECIPE = "--log-std-init -2.5"
+
+
+def _run(folder: str, task: str, episodes: int, flags: str) -> tuple[str, str]:
+    """(folder, the ``rlfd train`` command of a SAC run of ``task`` into it)."""
+    return folder, (
+        f"rlfd train --task {task} --algo sac --episodes {episodes} --seed 0 --envs 2 "
+        f"{flags} --out {folder}"
+    )
+
+
+#: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
+#: trains it). A row "run:<key>" evaluates the folder's policy.zip on each column's task.
+RUNS: dict[str, dict[str, tuple[str, str]]] = {
+    # Full-pose rLfD per task (Table IV). RJ-45 explores less (its 30 N limit).
+    "rlfd": {
+        "peg": _run("runs/peg_sac_te1_s0", "peg", 500, _SAC_PEG_RECIPE),
+        "gear": _run("runs/gear_sac_te1_s0", "gear", 300, _SAC_PEG_RECIPE),
+        "rj45": _run(
+            "runs/rj45_sac_s0", "rj45", 500, f"{_SAC_RJ45_RECIPE} --sac-learning-starts 1000"
+        ),
+    },
+    # Table III, trained on the easy hole, evaluated on both.
+    "pure": dict.fromkeys(
+        ("peg_easy", "peg_hard"),
+        _run(
+            "runs/peg_easy_sac_pure_e300_s0",
+            "peg_easy",
+            300,
+            f"{_SAC_PEG_RECIPE} --composition pure --reward dense",
+        ),
+    ),
+    "hybrid": dict.fromkeys(
+        ("peg_easy", "peg_hard"),
+        _run(
+            "runs/peg_easy_sac_hybrid_e300_s0",
+            "peg_easy",
+            300,
+            f"{_SAC_PEG_RECIPE} --composition hybrid",
+        ),
+    ),
+}
+# Table VI: the other task's full policy as is, fine-tuned for 60 episodes, and 60
+# episodes from scratch with the same settings.
+RUNS["source_as_is"] = {"gear": RUNS["rlfd"]["rj45"], "rj45": RUNS["rlfd"]["gear"]}
+_SHORT = {
+    "gear": _SAC_PEG_RECIPE,
+    "rj45": f"{_SAC_RJ45_RECIPE} --sac-learning-starts 200",
+}
+RUNS["scratch_60"] = {
+    task: _run(f"runs/{task}_sac_scratch_e60_s0", task, 60, _SHORT[task])
+    for task in ("gear", "rj45")
+}
+RUNS["from_source_60"] = {
+    task: _run(
+        f"runs/{task}_sac_from_{source}_e60_s0",
+        task,
+        60,
+        f"{_SHORT[task]} --init-from {RUNS['rlfd'][source][0]}/policy.zip",
+    )
+    for task, source in (("gear", "rj45"), ("rj45", "gear"))
+}
+
+#: The shipped rLfD policy, trained on the easy hole (Tables I-III).
+_SHIPPED_SAC = Row(
+    "rLfD SAC (shipped), mean action", f"policy:{SHIPPED_POLICY}", {"easy": 94.8, "hard": 55.0}
 )
 
 TABLES: dict[str, Table] = {
@@ -111,17 +184,8 @@ TABLES: dict[str, Table] = {
                 {"easy": 32.2, "hard": 14.4},
                 train_task="peg_easy",
             ),
-            Row(
-                "D  rLfD SAC (shipped), mean action",
-                f"policy:{SHIPPED_POLICY}",
-                {"easy": 94.8, "hard": 55.0},
-            ),
-            Row(
-                "D  rLfD SAC (shipped), sampled actions",
-                f"policy:{SHIPPED_POLICY}",
-                {"easy": 94.8, "hard": 55.0},
-                stochastic=True,
-            ),
+            replace(_SHIPPED_SAC, label="D  rLfD SAC (shipped), mean action"),
+            replace(_SHIPPED_SAC, label="D  rLfD SAC (shipped), sampled actions", stochastic=True),
         ],
         "Baselines are trained on peg_easy and evaluated on both holes, as in the paper.",
     ),
@@ -136,11 +200,7 @@ TABLES: dict[str, Table] = {
                 {"easy": 25.4, "hard": 8.0},
                 train_task="peg_easy",
             ),
-            Row(
-                "rLfD SAC (shipped), mean action",
-                f"policy:{SHIPPED_POLICY}",
-                {"easy": 94.8, "hard": 55.0},
-            ),
+            _SHIPPED_SAC,
             Row(
                 "rLfD PPO (shipped), mean action",
                 f"policy:{SHIPPED_PPO_POLICY}",
@@ -168,24 +228,60 @@ TABLES: dict[str, Table] = {
             Row("PPO / None", _NO_DEEP_RL, {"peg": 94.2, "gear": 50.0, "rj45": 57.2}),
             Row(
                 "Linear / Random",
-                "none:a combined linear/random policy is not wired into the harness yet",
+                "baseline:linear",
                 {"peg": 60.3, "gear": 76.2, "rj45": 57.3},
+                residual_mode="translation",
+                orientation_source="random",
             ),
             Row("Random / Random", "random", {"peg": 91.0, "gear": 86.9, "rj45": 64.8}),
             Row("PPO / PPO (rLfD)", _NO_DEEP_RL, {"peg": 97.9, "gear": 92.2, "rj45": 70.6}),
             Row(
                 "SAC / SAC (rLfD), mean action",
-                f"run:{_SAC_RUN}",
+                "run:rlfd",
                 {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
             ),
             Row(
                 "SAC / SAC (rLfD), sampled actions",
-                f"run:{_SAC_RUN}",
+                "run:rlfd",
                 {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
                 stochastic=True,
             ),
         ],
-        "Linear is trained on each column's task.",
+        "Linear is trained on each column's task (Linear / Random: on translation, with "
+        "uniform random rotations added at evaluation).",
+    ),
+    "3": Table(
+        "Table III: ways to use a nonlinear policy (simulation, trained on easy)",
+        _SIM,
+        [
+            Row(
+                "pure SAC (dense reward, no DMP)",
+                "run:pure",
+                {"easy": 94.4, "hard": 41.8},
+                composition="pure",
+            ),
+            Row(
+                "hybrid SAC (DMP, then SAC)",
+                "run:hybrid",
+                {"easy": 57.2, "hard": 45.6},
+                composition="hybrid",
+            ),
+            _SHIPPED_SAC,
+        ],
+        "Pure and hybrid: SAC with the shipped policy's settings, 300 episodes (the "
+        "paper: 12.5K and 8K); they act by velocity commands (5 cm/s, 20 deg/s per unit).",
+    ),
+    "6": Table(
+        "Table VI: transfer between gear and RJ-45 (full-pose SAC residuals)",
+        {"gear": "gear", "rj45": "rj45"},
+        [
+            Row("full training on the target", "run:rlfd", {"gear": 92.2, "rj45": 70.6}),
+            Row("source policy as is", "run:source_as_is", {"gear": 85.4, "rj45": 54.5}),
+            Row("60 episodes from scratch", "run:scratch_60", {"gear": 70.3, "rj45": 59.1}),
+            Row("60 episodes from the source", "run:from_source_60", {"gear": 92.0, "rj45": 70.6}),
+        ],
+        "Source of gear = the RJ-45 policy and back. The paper's 60 episodes are 3 PPO "
+        "updates; here 60 episodes of SAC (an update per step).",
     ),
 }
 
@@ -223,6 +319,17 @@ TABLES["forces"] = Table(
 )
 
 
+#: The residual bounds (m, rad) of the evaluations stored before tasks had their own.
+_DEFAULT_BOUNDS = (0.01, 0.087)
+
+
+def _bounds(task: str) -> list[float]:
+    from rlfd_drake.diagram import RlfdDiagramConfig
+    from rlfd_drake.tasks import load_task
+
+    return list(RlfdDiagramConfig().residual_bounds(load_task(task)))
+
+
 def _baseline_run(
     method: str, task: str, mode: str, episodes: int, seed: int, workers: int
 ) -> Path:
@@ -257,14 +364,23 @@ def _evaluation(
     seed: int,
     workers: int,
     stochastic: bool = False,
+    composition: str = "residual",
 ) -> dict:
-    """The evaluation of ``policy`` on ``task``, reusing a stored one of the same size."""
+    """The evaluation of ``policy`` on ``task``, reusing a stored one of the same size,
+    seed, composition and residual bounds."""
     from rlfd_drake.evaluate import evaluate, result_from_json, write_evaluation
 
     path = results_dir() / f"{name}.json"
     if path.exists():
         stored = result_from_json(path)
-        if stored.get("episodes") == episodes and stored.get("seed") == seed:
+        same = (
+            stored.get("episodes") == episodes
+            and stored.get("seed") == seed
+            and stored.get("composition", "residual") == composition
+            # Evaluations from before the bounds were stored used 1 cm / 0.087 rad.
+            and stored.get("residual_bounds", list(_DEFAULT_BOUNDS)) == _bounds(task)
+        )
+        if same:
             return stored
     print(f"  evaluating {name} ({episodes} episodes)", flush=True)
     result = evaluate(
@@ -276,6 +392,7 @@ def _evaluation(
         residual_mode=mode,
         progress=False,
         deterministic=not stochastic,
+        composition=composition,
     )
     write_evaluation(result, name)
     return result
@@ -294,9 +411,9 @@ def _cell(row: Row, task: str, budget: str, seed: int, workers: int) -> dict:
         policy = str(models_dir() / detail)
         label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
     elif kind == "run":
-        run = Path(detail.format(task=task))
+        folder, command = RUNS[detail][task]
+        run = Path(folder)
         if not (run / "policy.zip").exists():
-            command = _SAC_COMMAND.format(task=task)
             return {"status": "not run", "reason": f"no policy in {run} (train it: {command})"}
         metrics = json.loads((run / "metrics.json").read_text())
         policy, label, trained = str(run / "policy.zip"), run.name, metrics.get("episodes")
@@ -307,10 +424,23 @@ def _cell(row: Row, task: str, budget: str, seed: int, workers: int) -> dict:
     else:
         raise ValueError(f"row {row.label!r} has an unknown source {row.source!r}")
     mode = "" if row.residual_mode == "full" else f"_{row.residual_mode}"
+    eval_mode = row.residual_mode
+    if row.orientation_source is not None:
+        policy = f"{policy}|{row.orientation_source}"
+        mode += f"_{row.orientation_source}_orientation"
+        eval_mode = "full"
     mode += "_stochastic" if row.stochastic else ""
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
     result = _evaluation(
-        task, policy, name, row.residual_mode, eval_episodes, seed, workers, row.stochastic
+        task,
+        policy,
+        name,
+        eval_mode,
+        eval_episodes,
+        seed,
+        workers,
+        row.stochastic,
+        row.composition,
     )
     return {
         "status": "measured",

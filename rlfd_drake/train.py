@@ -124,6 +124,8 @@ class TrainConfig:
             raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
         if self.sac_target_entropy is not None and not np.isfinite(self.sac_target_entropy):
             raise ValueError(f"sac_target_entropy must be finite, got {self.sac_target_entropy}")
+        if not (np.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ValueError(f"learning_rate must be a positive number, got {self.learning_rate}")
         if not np.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be finite, got {self.log_std_init}")
         if self.composition not in COMPOSITIONS:

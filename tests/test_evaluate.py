@@ -152,3 +152,20 @@ def test_saved_sb3_models_become_residual_policies(module, name, kind, tmp_path)
     assert first.shape == (6,) and np.all(np.isfinite(first)) and np.all(np.abs(first) <= 1.0)
     policy.reset()
     np.testing.assert_allclose(policy(obs), first)  # deterministic after a reset
+
+
+def test_split_spec_takes_translation_and_orientation_from_different_policies():
+    """Table IV's "translation / orientation" rows, e.g. Linear / Random."""
+    from rlfd_drake.baselines.split import SplitResidualPolicy
+
+    obs = np.zeros(OBSERVATION_SIZE, np.float32)
+    policy = make_policy("dmp|random", episode_seed=3)
+    assert isinstance(policy, SplitResidualPolicy) and policy.translation is None
+    actions = np.array([policy(obs) for _ in range(20)])
+    assert np.all(actions[:, :3] == 0.0) and np.all(actions[:, 3:] != 0.0)
+    both = SplitResidualPolicy(lambda o: np.full(6, 0.25), lambda o: np.full(6, -0.5))
+    np.testing.assert_array_equal(both(obs), [0.25] * 3 + [-0.5] * 3)
+    with pytest.raises(ValueError, match="translation\\|orientation"):
+        make_policy("dmp|random|random")
+    with pytest.raises(ValueError, match="needs the task"):
+        make_policy("runs/x/baseline.npz|random")

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
 import rlfd_drake.reproduce as reproduce
 
 
-def _fake_evaluation(task, policy, name, mode, episodes, seed, workers, stochastic=False):
+def _fake_evaluation(
+    task, policy, name, mode, episodes, seed, workers, stochastic=False, composition="residual"
+):
     rate = {"dmp": 0.5, "random": 0.6}.get(policy, 0.7)
     return {
         "success_rate": rate,
@@ -112,3 +115,83 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
     )
     # Table V's evaluations are Table IV's: same result names.
     assert all(name.startswith("eval_") for name in calls)
+
+
+def _fake_runs(tmp_path, *folders):
+    for folder in folders:
+        run = tmp_path / folder
+        run.mkdir(parents=True)
+        (run / "policy.zip").write_bytes(b"")
+        (run / "metrics.json").write_text(json.dumps({"episodes": 60}))
+
+
+def test_linear_random_row_splits_translation_and_orientation(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    calls = []
+
+    def recording(*args):
+        calls.append(args)
+        return _fake_evaluation(*args)
+
+    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    monkeypatch.setattr(
+        reproduce,
+        "_baseline_run",
+        lambda method, task, *a: Path(f"runs/{task}_{method}/baseline.npz"),
+    )
+    reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    split = [c for c in calls if c[1].endswith("|random")]
+    assert [c[0] for c in split] == ["peg", "gear", "rj45"]
+    assert split[0][1] == "runs/peg_linear/baseline.npz|random"
+    assert all(c[3] == "full" for c in split)  # the composer runs both parts
+    assert "random_orientation" in split[0][2]
+
+
+def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _fake_runs(
+        tmp_path,
+        "runs/peg_easy_sac_pure_e300_s0",
+        "runs/gear_sac_te1_s0",
+        "runs/gear_sac_from_rj45_e60_s0",
+    )
+    calls = []
+
+    def recording(*args):
+        calls.append(args)
+        return _fake_evaluation(*args)
+
+    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    data = reproduce.reproduce_table("3", budget="quick", seed=0, workers=1)
+    pure = {c[0]: c for c in calls if "pure" in c[1]}
+    assert set(pure) == {"peg_easy", "peg_hard"}  # trained on easy, evaluated on both
+    assert all(c[8] == "pure" for c in pure.values())
+    hybrid = next(r for r in data["rows"] if r["label"].startswith("hybrid"))
+    assert "--composition hybrid" in hybrid["ours"]["easy"]["reason"]
+    calls.clear()
+    data = reproduce.reproduce_table("6", budget="quick", seed=0, workers=1)
+    rows = {r["label"]: r["ours"] for r in data["rows"]}
+    # The RJ-45 column of "source as is" runs the gear policy on RJ-45.
+    assert any(c[0] == "rj45" and c[1] == "runs/gear_sac_te1_s0/policy.zip" for c in calls)
+    assert rows["60 episodes from the source"]["gear"]["training_episodes"] == 60
+    reason = rows["60 episodes from the source"]["rj45"]["reason"]
+    assert "--init-from runs/gear_sac_te1_s0/policy.zip" in reason
+
+
+def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, monkeypatch):
+    from rlfd_drake import evaluate as evaluate_module
+    from rlfd_drake.results import write_result
+
+    monkeypatch.chdir(tmp_path)
+    fresh = []
+    monkeypatch.setattr(
+        evaluate_module, "evaluate", lambda *a, **k: fresh.append(a) or {"episodes": 40}
+    )
+    monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
+    stored = {"episodes": 40, "seed": 0, "success_rate": 0.0}
+    write_result("eval_rj45_random_n40_s0", stored, seed=0)  # before bounds were stored
+    reproduce._evaluation("rj45", "random", "eval_rj45_random_n40_s0", "full", 40, 0, 1)
+    assert len(fresh) == 1  # RJ-45's bounds are no longer the old 1 cm
+    write_result("eval_peg_random_n40_s0", stored, seed=0)
+    reproduce._evaluation("peg", "random", "eval_peg_random_n40_s0", "full", 40, 0, 1)
+    assert len(fresh) == 1  # the peg's are
