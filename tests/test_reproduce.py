@@ -152,8 +152,8 @@ def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monk
     _fake_runs(
         tmp_path,
         "runs/peg_easy_sac_pure_e300_s0",
-        "runs/gear_sac_te1_s0",
-        "runs/gear_sac_from_rj45_e60_s0",
+        "runs/gear_ppo_s0",
+        "runs/gear_ppo_from_rj45_e60_s0",
     )
     calls = []
 
@@ -172,10 +172,10 @@ def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monk
     data = reproduce.reproduce_table("6", budget="quick", seed=0, workers=1)
     rows = {r["label"]: r["ours"] for r in data["rows"]}
     # The RJ-45 column of "source as is" runs the gear policy on RJ-45.
-    assert any(c[0] == "rj45" and c[1] == "runs/gear_sac_te1_s0/policy.zip" for c in calls)
+    assert any(c[0] == "rj45" and c[1] == "runs/gear_ppo_s0/policy.zip" for c in calls)
     assert rows["60 episodes from the source"]["gear"]["training_episodes"] == 60
     reason = rows["60 episodes from the source"]["rj45"]["reason"]
-    assert "--init-from runs/gear_sac_te1_s0/policy.zip" in reason
+    assert "--algo ppo" in reason and "--init-from runs/gear_ppo_s0/policy.zip" in reason
 
 
 def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, monkeypatch):
