@@ -336,6 +336,15 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _policy_stem(spec: str) -> str:
+    """A file-name stem for a policy spec: a baseline's run folder (its file is always
+    baseline.npz), a model's file stem, "a_and_b" for a translation|orientation split."""
+    if "|" in spec:
+        return "_and_".join(_policy_stem(part) for part in spec.split("|"))
+    path = Path(spec)
+    return path.parent.name if path.suffix == ".npz" else path.stem
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from rlfd_drake.evaluate import evaluate, write_evaluation
 
@@ -351,10 +360,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         composition=args.composition,
     )
     mode = "_stochastic" if args.stochastic else ""
-    policy_path = Path(args.policy)
-    # A baseline run folder names its file baseline.npz: the folder tells them apart.
-    stem = policy_path.parent.name if policy_path.suffix == ".npz" else policy_path.stem
-    name = args.name or f"eval_{args.task}_{stem}{mode}_s{args.seed}"
+    name = args.name or f"eval_{args.task}_{_policy_stem(args.policy)}{mode}_s{args.seed}"
     paths = write_evaluation(result, name)
     if args.json:
         _print_json(result)

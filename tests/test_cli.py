@@ -43,3 +43,11 @@ def test_demo_record_refuses_to_overwrite(tmp_path, capsys):
     out.write_text("precious\n")
     assert main(["demo", "record", "--task", "peg_easy", "--out", str(out)]) == 2
     assert out.read_text() == "precious\n"
+
+
+def test_evaluation_file_names_of_policy_specs():
+    from rlfd_drake.cli import _policy_stem
+
+    assert _policy_stem("runs/peg_linear_s0/baseline.npz") == "peg_linear_s0"
+    assert _policy_stem("runs/peg_sac_s0/policy.zip") == "policy"
+    assert _policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
