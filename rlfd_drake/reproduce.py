@@ -119,25 +119,25 @@ RUNS: dict[str, dict[str, tuple[str, str]]] = {
     # Full-pose rLfD per task with PPO (the paper's physical-task policy).
     "rlfd_ppo": {
         "peg": _run("runs/peg_ppo_s0", "peg", 500, algo="ppo"),
-        "gear": _run("runs/gear_ppo_s0", "gear", 500, algo="ppo"),
+        "gear": _run("runs/gear_ppo_s0", "gear", 300, algo="ppo"),
         "rj45": _run("runs/rj45_ppo_s0", "rj45", 500, _RJ45_RECIPE, algo="ppo"),
     },
     # Table III, trained on the easy hole, evaluated on both.
     "pure": dict.fromkeys(
         ("peg_easy", "peg_hard"),
         _run(
-            "runs/peg_easy_sac_pure_e300_s0",
+            "runs/peg_easy_sac_pure_e200_s0",
             "peg_easy",
-            300,
+            200,
             f"{_SAC_PEG_RECIPE} --composition pure --reward dense",
         ),
     ),
     "hybrid": dict.fromkeys(
         ("peg_easy", "peg_hard"),
         _run(
-            "runs/peg_easy_sac_hybrid_e300_s0",
+            "runs/peg_easy_sac_hybrid_e200_s0",
             "peg_easy",
-            300,
+            200,
             f"{_SAC_PEG_RECIPE} --composition hybrid",
         ),
     ),
@@ -284,7 +284,7 @@ TABLES: dict[str, Table] = {
             ),
             _SHIPPED_SAC,
         ],
-        "Pure and hybrid: SAC with the shipped policy's settings, 300 episodes (the "
+        "Pure and hybrid: SAC with the shipped policy's settings, 200 episodes (the "
         "paper: 12.5K and 8K); they act by velocity commands (5 cm/s, 20 deg/s per unit).",
     ),
     "6": Table(

@@ -151,7 +151,7 @@ def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monk
     monkeypatch.chdir(tmp_path)
     _fake_runs(
         tmp_path,
-        "runs/peg_easy_sac_pure_e300_s0",
+        "runs/peg_easy_sac_pure_e200_s0",
         "runs/gear_ppo_s0",
         "runs/gear_ppo_from_rj45_e60_s0",
     )
