@@ -161,6 +161,15 @@ RUNS["from_source_60"] = {
     for task, source in (("gear", "rj45"), ("rj45", "gear"))
 }
 
+
+def _mean_and_sampled(label: str, source: str, paper: dict[str, float | None]) -> list[Row]:
+    """A trained policy's two rows: acting with its mean, and sampling its actions."""
+    return [
+        Row(f"{label}, mean action", source, paper),
+        Row(f"{label}, sampled actions", source, paper, stochastic=True),
+    ]
+
+
 #: The shipped rLfD policy, trained on the easy hole (Tables I-III).
 _SHIPPED_SAC = Row(
     "rLfD SAC (shipped), mean action", f"policy:{SHIPPED_POLICY}", {"easy": 94.8, "hard": 55.0}
@@ -240,27 +249,11 @@ TABLES: dict[str, Table] = {
                 orientation_source="random",
             ),
             Row("Random / Random", "random", {"peg": 91.0, "gear": 86.9, "rj45": 64.8}),
-            Row(
-                "PPO / PPO (rLfD), mean action",
-                "run:rlfd_ppo",
-                {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
+            *_mean_and_sampled(
+                "PPO / PPO (rLfD)", "run:rlfd_ppo", {"peg": 97.9, "gear": 92.2, "rj45": 70.6}
             ),
-            Row(
-                "PPO / PPO (rLfD), sampled actions",
-                "run:rlfd_ppo",
-                {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
-                stochastic=True,
-            ),
-            Row(
-                "SAC / SAC (rLfD), mean action",
-                "run:rlfd",
-                {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
-            ),
-            Row(
-                "SAC / SAC (rLfD), sampled actions",
-                "run:rlfd",
-                {"peg": 97.9, "gear": 92.2, "rj45": 70.6},
-                stochastic=True,
+            *_mean_and_sampled(
+                "SAC / SAC (rLfD)", "run:rlfd", {"peg": 97.9, "gear": 92.2, "rj45": 70.6}
             ),
         ],
         "Linear is trained on each column's task (Linear / Random: on translation, with "

@@ -87,6 +87,9 @@ class VelocityCommandSetpoint(LeafSystem):
                 f"period_s must be a positive number of seconds, got {config.period_s}"
             )
         self.config = config
+        # The command is held for 50 ticks (10 Hz against 500 Hz): scale it once.
+        self._cached_key: bytes | None = None
+        self._cached_command: tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
         self._X_port = self.DeclareVectorInputPort("X_WE_base", 7)
         self._V_port = self.DeclareVectorInputPort("V_WE_base", 6)
         self._command_port = self.DeclareVectorInputPort("residual", 6)
@@ -118,6 +121,9 @@ class VelocityCommandSetpoint(LeafSystem):
 
     def Command(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(v (3,) m/s, w (3,) rad/s) of a normalised command (6,)."""
+        key = np.asarray(command).tobytes()
+        if key == self._cached_key:
+            return self._cached_command
         if not np.all(np.isfinite(command)):
             raise RuntimeError(
                 f"VelocityCommandSetpoint: non-finite value on port 'residual': {command}"
@@ -131,6 +137,7 @@ class VelocityCommandSetpoint(LeafSystem):
         norm = float(np.linalg.norm(w))
         if norm > max_angle:
             w = w * (max_angle / norm)
+        self._cached_key, self._cached_command = key, (v, w)
         return v, w
 
     def _active(self, context: Context) -> bool:
