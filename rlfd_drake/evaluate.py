@@ -63,6 +63,7 @@ RESULT_KEYS = (
     "insertion_time_std_s",
     "peak_force_n",
     "mean_force_n",
+    "peak_joint_contact_torque_nm",
     "forces_by_outcome",
     "per_bin",
     "failures",
@@ -230,12 +231,20 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
 
     def forces(mask: np.ndarray) -> dict:
         if not mask.any():
-            return {"n": 0, "peak_force_n": None, "mean_force_n": None}
+            return {
+                "n": 0,
+                "peak_force_n": None,
+                "mean_force_n": None,
+                "peak_joint_contact_torque_nm": None,
+            }
         chosen = [r for r, m in zip(results, mask, strict=True) if m]
         return {
             "n": len(chosen),
             "peak_force_n": float(np.mean([r.peak_force_n for r in chosen])),
             "mean_force_n": float(np.mean([r.mean_force_n for r in chosen])),
+            "peak_joint_contact_torque_nm": float(
+                np.mean([r.peak_joint_contact_torque_nm for r in chosen])
+            ),
         }
 
     failures = Counter(r.failure_kind for r in results if r.failure_kind is not None)
@@ -251,6 +260,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         ],
         "final_distance_mm": [round(1e3 * r.final_distance_m, 2) for r in results],
         "peak_force_n": [round(r.peak_force_n, 2) for r in results],
+        "peak_joint_contact_torque_nm": [round(r.peak_joint_contact_torque_nm, 2) for r in results],
         "failure": [r.failure_reason for r in results],
     }
     return {
@@ -261,6 +271,9 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "insertion_time_std_s": float(times.std()) if times.size else None,
         "peak_force_n": float(np.mean([r.peak_force_n for r in results])),
         "mean_force_n": float(np.mean([r.mean_force_n for r in results])),
+        "peak_joint_contact_torque_nm": float(
+            np.mean([r.peak_joint_contact_torque_nm for r in results])
+        ),
         "forces_by_outcome": {"success": forces(ok), "failure": forces(~ok)},
         "per_bin": per_bin,
         "failures": dict(sorted(failures.items())),
@@ -309,6 +322,8 @@ def evaluate(
         ``success_std_kind`` says which), ``insertion_time_s`` (mean over successes,
         s, None if none), ``peak_force_n`` and ``mean_force_n`` (means over episodes
         of the episode's peak and time-averaged total contact force, N),
+        ``peak_joint_contact_torque_nm`` (mean over episodes of the peak generalised
+        contact torque on an arm joint, N m: the paper's "generalised forces felt"),
         ``forces_by_outcome``, ``per_bin`` (bin, n, success_rate, mean
         position_offset_m, mean rotation_offset_deg), ``failures`` (count per
         failure kind), ``wall_time_s`` and a compact per-episode ``episode_table``.

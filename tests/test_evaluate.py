@@ -42,6 +42,10 @@ def test_evaluate_returns_the_documented_keys(dmp_result):
     if n_success:
         assert 0.0 < r["insertion_time_s"] < 10.0
     assert r["peak_force_n"] >= r["mean_force_n"] >= 0.0
+    # The insertion touches the fixture: the arm's joints feel the contact.
+    assert r["peak_joint_contact_torque_nm"] > 0.0
+    torques = r["episode_table"]["peak_joint_contact_torque_nm"]
+    assert np.mean(torques) == pytest.approx(r["peak_joint_contact_torque_nm"], abs=0.01)
     assert r["wall_time_s"] > 0.0
     json.dumps(r)  # JSON-serialisable as is
 

@@ -11,7 +11,16 @@ import rlfd_drake.reproduce as reproduce
 
 
 def _fake_evaluation(
-    task, policy, name, mode, episodes, seed, workers, stochastic=False, composition="residual"
+    task,
+    policy,
+    name,
+    mode,
+    episodes,
+    seed,
+    workers,
+    stochastic=False,
+    composition="residual",
+    required=(),
 ):
     rate = {"dmp": 0.5, "random": 0.6}.get(policy, 0.7)
     return {
@@ -19,6 +28,11 @@ def _fake_evaluation(
         "success_std": 0.05,
         "insertion_time_s": 6.0,
         "peak_force_n": 40.0,
+        "forces_by_outcome": {
+            "success": {"peak_force_n": 30.0},
+            "failure": {"peak_force_n": None},
+        },
+        "peak_joint_contact_torque_nm": 2.5,
         "episodes": episodes,
     }
 
@@ -54,10 +68,11 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
     data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
-    ppo = next(row for row in data["rows"] if row["label"] == "PPO / None")
+    ppo = next(row for row in data["rows"] if row["label"] == "PPO / None, mean action")
     assert ppo["ours"]["peg"]["status"] == "not run"
     markdown = (tmp_path / "results" / "table_4.md").read_text()
-    assert "Not run: " in markdown and "deep-RL training per row" in markdown
+    assert "Not run: " in markdown
+    assert "--algo ppo --episodes 300 --seed 0 --envs 2 --residual-mode translation" in markdown
     # A trained run folder is evaluated; a missing one says how to train it.
     sac = next(row for row in data["rows"] if row["label"] == "SAC / SAC (rLfD), mean action")
     assert "rlfd train --task peg --algo sac" in sac["ours"]["peg"]["reason"]
@@ -71,9 +86,9 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
     (run / "metrics.json").write_text(json.dumps({"episodes": 500}))
     names = []
 
-    def recording(*args):
+    def recording(*args, **kwargs):
         names.append(args[2])
-        return _fake_evaluation(*args)
+        return _fake_evaluation(*args, **kwargs)
 
     monkeypatch.setattr(reproduce, "_evaluation", recording)
     monkeypatch.setattr(
@@ -96,9 +111,9 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
     monkeypatch.chdir(tmp_path)
     calls = []
 
-    def counting(*args):
+    def counting(*args, **kwargs):
         calls.append(args[2])
-        return _fake_evaluation(*args)
+        return _fake_evaluation(*args, **kwargs)
 
     monkeypatch.setattr(reproduce, "_evaluation", counting)
     monkeypatch.setattr(
@@ -110,7 +125,7 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
     assert "| None / None | 7.0 | 6.0 | 8.1 | 6.0 | 10.0 | 6.0 | n/a |" in markdown
     reproduce.reproduce_table("forces", budget="quick", seed=0, workers=1)
     assert (
-        "| A  DMP | n/a | 40.0 | n/a | 40.0 | n/a |"
+        "| A  DMP | n/a | 40 (30 / -); 2.5 N m | n/a | 40 (30 / -); 2.5 N m | n/a |"
         in (tmp_path / "results" / "table_forces.md").read_text()
     )
     # Table V's evaluations are Table IV's: same result names.
@@ -129,9 +144,9 @@ def test_linear_random_row_splits_translation_and_orientation(tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     calls = []
 
-    def recording(*args):
+    def recording(*args, **kwargs):
         calls.append(args)
-        return _fake_evaluation(*args)
+        return _fake_evaluation(*args, **kwargs)
 
     monkeypatch.setattr(reproduce, "_evaluation", recording)
     monkeypatch.setattr(
@@ -157,9 +172,9 @@ def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monk
     )
     calls = []
 
-    def recording(*args):
+    def recording(*args, **kwargs):
         calls.append(args)
-        return _fake_evaluation(*args)
+        return _fake_evaluation(*args, **kwargs)
 
     monkeypatch.setattr(reproduce, "_evaluation", recording)
     data = reproduce.reproduce_table("3", budget="quick", seed=0, workers=1)
@@ -195,3 +210,15 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
     write_result("eval_peg_random_n40_s0", stored, seed=0)
     reproduce._evaluation("peg", "random", "eval_peg_random_n40_s0", "full", 40, 0, 1)
     assert len(fresh) == 1  # the peg's are
+    # The force table needs figures older evaluations lack: those are measured again.
+    reproduce._evaluation(
+        "peg",
+        "random",
+        "eval_peg_random_n40_s0",
+        "full",
+        40,
+        0,
+        1,
+        required=("peak_joint_contact_torque_nm",),
+    )
+    assert len(fresh) == 2
