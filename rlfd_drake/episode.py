@@ -204,6 +204,9 @@ class EpisodeResult:
             simulation (the episode may stop early once inserted), N.
         peak_joint_contact_torque_nm: peak |generalised contact torque| over the arm
             joints, N m.
+        peak_low_passed_force_n: peak of the total contact force low-passed with the
+            observer's time constant (20 ms), N: what force limits are checked against,
+            without the one-step impact spikes.
         force_limit_broken: the peak force exceeded ``task.force_limit_n``.
         failure_reason: None on success, else "<kind>: <details>" with kind in
             :data:`FAILURE_KINDS`.
@@ -219,6 +222,7 @@ class EpisodeResult:
     peak_force_n: float
     mean_force_n: float
     peak_joint_contact_torque_nm: float
+    peak_low_passed_force_n: float
     force_limit_broken: bool
     failure_reason: str | None
     sim_time_s: float
@@ -323,6 +327,7 @@ def run_episode(
             peak_force_n=metrics.get("peak_force_n", 0.0),
             mean_force_n=metrics.get("mean_force_n", 0.0),
             peak_joint_contact_torque_nm=metrics.get("peak_torque", 0.0),
+            peak_low_passed_force_n=metrics.get("peak_low_passed_force_n", 0.0),
             force_limit_broken=bool(metrics.get("force_limit_broken", False)),
             failure_reason=failure,
             sim_time_s=float(context.get_time()),
@@ -395,6 +400,7 @@ def run_episode(
         "peak_force_n": float(forces[0]),
         "mean_force_n": float(forces[1]),
         "peak_torque": float(forces[2]),
+        "peak_low_passed_force_n": float(forces[3]),
         "force_limit_broken": force_limit_broken,
     }
     plant = rlfd.scene.plant

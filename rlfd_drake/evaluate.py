@@ -64,6 +64,7 @@ RESULT_KEYS = (
     "peak_force_n",
     "mean_force_n",
     "peak_joint_contact_torque_nm",
+    "peak_low_passed_force_n",
     "forces_by_outcome",
     "per_bin",
     "failures",
@@ -236,6 +237,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
                 "peak_force_n": None,
                 "mean_force_n": None,
                 "peak_joint_contact_torque_nm": None,
+                "peak_low_passed_force_n": None,
             }
         chosen = [r for r, m in zip(results, mask, strict=True) if m]
         return {
@@ -245,6 +247,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
             "peak_joint_contact_torque_nm": float(
                 np.mean([r.peak_joint_contact_torque_nm for r in chosen])
             ),
+            "peak_low_passed_force_n": float(np.mean([r.peak_low_passed_force_n for r in chosen])),
         }
 
     failures = Counter(r.failure_kind for r in results if r.failure_kind is not None)
@@ -261,6 +264,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "final_distance_mm": [round(1e3 * r.final_distance_m, 2) for r in results],
         "peak_force_n": [round(r.peak_force_n, 2) for r in results],
         "peak_joint_contact_torque_nm": [round(r.peak_joint_contact_torque_nm, 2) for r in results],
+        "peak_low_passed_force_n": [round(r.peak_low_passed_force_n, 2) for r in results],
         "failure": [r.failure_reason for r in results],
     }
     return {
@@ -274,6 +278,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "peak_joint_contact_torque_nm": float(
             np.mean([r.peak_joint_contact_torque_nm for r in results])
         ),
+        "peak_low_passed_force_n": float(np.mean([r.peak_low_passed_force_n for r in results])),
         "forces_by_outcome": {"success": forces(ok), "failure": forces(~ok)},
         "per_bin": per_bin,
         "failures": dict(sorted(failures.items())),
@@ -324,6 +329,8 @@ def evaluate(
         of the episode's peak and time-averaged total contact force, N),
         ``peak_joint_contact_torque_nm`` (mean over episodes of the peak generalised
         contact torque on an arm joint, N m: the paper's "generalised forces felt"),
+        ``peak_low_passed_force_n`` (mean of the peak of the 20 ms low-passed total
+        contact force, N: without the one-step impact spikes),
         ``forces_by_outcome``, ``per_bin`` (bin, n, success_rate, mean
         position_offset_m, mean rotation_offset_deg), ``failures`` (count per
         failure kind), ``wall_time_s`` and a compact per-episode ``episode_table``.

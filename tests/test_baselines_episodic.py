@@ -32,6 +32,7 @@ def _result(success: bool, insertion_time_s: float) -> EpisodeResult:
         peak_force_n=1.0,
         mean_force_n=1.0,
         peak_joint_contact_torque_nm=0.0,
+        peak_low_passed_force_n=1.0,
         force_limit_broken=False,
         failure_reason=None if success else "missed: test",
         sim_time_s=10.0,

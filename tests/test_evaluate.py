@@ -46,6 +46,8 @@ def test_evaluate_returns_the_documented_keys(dmp_result):
     assert r["peak_joint_contact_torque_nm"] > 0.0
     torques = r["episode_table"]["peak_joint_contact_torque_nm"]
     assert np.mean(torques) == pytest.approx(r["peak_joint_contact_torque_nm"], abs=0.01)
+    # Low-passing can only lower a peak.
+    assert 0.0 < r["peak_low_passed_force_n"] <= r["peak_force_n"]
     assert r["wall_time_s"] > 0.0
     json.dumps(r)  # JSON-serialisable as is
 

@@ -33,6 +33,7 @@ def _fake_evaluation(
             "failure": {"peak_force_n": None},
         },
         "peak_joint_contact_torque_nm": 2.5,
+        "peak_low_passed_force_n": 20.0,
         "episodes": episodes,
     }
 
@@ -125,7 +126,7 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
     assert "| None / None | 7.0 | 6.0 | 8.1 | 6.0 | 10.0 | 6.0 | n/a |" in markdown
     reproduce.reproduce_table("forces", budget="quick", seed=0, workers=1)
     assert (
-        "| A  DMP | n/a | 40 (30 / -); 2.5 N m | n/a | 40 (30 / -); 2.5 N m | n/a |"
+        "| A  DMP | n/a | 40 (30 / -); LP 20; 2.5 N m | n/a | 40 (30 / -); LP 20; 2.5 N m | n/a |"
         in (tmp_path / "results" / "table_forces.md").read_text()
     )
     # Table V's evaluations are Table IV's: same result names.
