@@ -295,6 +295,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         sac_learning_starts=args.sac_learning_starts,
         composition=args.composition,
         init_from=args.init_from,
+        force_limit_n=args.force_limit_n,
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -465,6 +466,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--init-from", help="start from this saved policy's networks (transfer, Table VI)"
+    )
+    train.add_argument(
+        "--force-limit-n",
+        type=float,
+        help="end training episodes whose low-passed contact force exceeds this, N (a "
+        "collision reflex; default: the task's own limit)",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

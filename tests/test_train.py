@@ -117,6 +117,28 @@ def test_bad_config_names_the_field():
         TrainConfig(episodes=0)
     with pytest.raises(ValueError, match="task must be one of"):
         TrainConfig(task="peg_huge")
+    with pytest.raises(ValueError, match="force_limit_n must be a positive number, got 0"):
+        TrainConfig(force_limit_n=0.0)
+
+
+def test_training_force_limit_ends_episodes_that_push_harder():
+    """A training-only force limit reaches the envs and ends an episode as a failure
+    once the low-passed contact force exceeds it (the DMP alone from the demo start,
+    with the hole 2 mm off, lands on the chamfer with more than 1 N)."""
+    from rlfd_drake.train import _env_kwargs
+
+    kwargs = _env_kwargs(TrainConfig(task="peg_easy", force_limit_n=1.0))
+    assert kwargs["task"].name == "peg_easy" and kwargs["task"].force_limit_n == 1.0
+    assert _env_kwargs(TrainConfig(task="peg_easy"))["task"] == "peg_easy"
+    env = RlfdEnv(**kwargs)
+    zero = {"start_dp": np.zeros(3), "start_dq": np.array([1.0, 0.0, 0.0, 0.0])}
+    env.reset(seed=0, options={**zero, "fixture_dp": np.array([0.002, 0.0, 0.0])})
+    for _ in range(50):
+        _, reward, terminated, truncated, info = env.step(np.zeros(6, np.float32))
+        if terminated or truncated:
+            break
+    assert terminated and info["force_limit_broken"] and not info["success"]
+    assert reward == 0.0
 
 
 def test_deployed_policy_matches_the_frame_stacked_training_view():
