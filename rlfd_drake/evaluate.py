@@ -230,25 +230,23 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
     times = times[np.isfinite(times)]
     ok = success > 0.5
 
-    def forces(mask: np.ndarray) -> dict:
-        if not mask.any():
-            return {
-                "n": 0,
-                "peak_force_n": None,
-                "mean_force_n": None,
-                "peak_joint_contact_torque_nm": None,
-                "peak_low_passed_force_n": None,
-            }
-        chosen = [r for r, m in zip(results, mask, strict=True) if m]
+    # EpisodeResult fields averaged over episodes (all, successes, failures).
+    force_fields = (
+        "peak_force_n",
+        "mean_force_n",
+        "peak_joint_contact_torque_nm",
+        "peak_low_passed_force_n",
+    )
+
+    def force_means(chosen: list[EpisodeResult]) -> dict:
         return {
-            "n": len(chosen),
-            "peak_force_n": float(np.mean([r.peak_force_n for r in chosen])),
-            "mean_force_n": float(np.mean([r.mean_force_n for r in chosen])),
-            "peak_joint_contact_torque_nm": float(
-                np.mean([r.peak_joint_contact_torque_nm for r in chosen])
-            ),
-            "peak_low_passed_force_n": float(np.mean([r.peak_low_passed_force_n for r in chosen])),
+            field: float(np.mean([getattr(r, field) for r in chosen])) if chosen else None
+            for field in force_fields
         }
+
+    def forces(mask: np.ndarray) -> dict:
+        chosen = [r for r, m in zip(results, mask, strict=True) if m]
+        return {"n": len(chosen), **force_means(chosen)}
 
     failures = Counter(r.failure_kind for r in results if r.failure_kind is not None)
     table = {
@@ -273,12 +271,7 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "success_std_kind": std_kind,
         "insertion_time_s": float(times.mean()) if times.size else None,
         "insertion_time_std_s": float(times.std()) if times.size else None,
-        "peak_force_n": float(np.mean([r.peak_force_n for r in results])),
-        "mean_force_n": float(np.mean([r.mean_force_n for r in results])),
-        "peak_joint_contact_torque_nm": float(
-            np.mean([r.peak_joint_contact_torque_nm for r in results])
-        ),
-        "peak_low_passed_force_n": float(np.mean([r.peak_low_passed_force_n for r in results])),
+        **force_means(results),
         "forces_by_outcome": {"success": forces(ok), "failure": forces(~ok)},
         "per_bin": per_bin,
         "failures": dict(sorted(failures.items())),
