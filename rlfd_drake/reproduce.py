@@ -377,14 +377,21 @@ def _bounds(task: str) -> list[float]:
     return list(RlfdDiagramConfig().residual_bounds(load_task(task)))
 
 
+def _baseline_path(method: str, task: str, mode: str, episodes: int, seed: int) -> Path:
+    """Where :func:`_baseline_run` keeps the trained baseline (it may not exist)."""
+    return (
+        Path("runs") / "reproduce" / f"{task}_{method}_{mode}_e{episodes}_s{seed}" / "baseline.npz"
+    )
+
+
 def _baseline_run(
     method: str, task: str, mode: str, episodes: int, seed: int, workers: int
 ) -> Path:
     """The trained baseline's file, training it first if it is missing."""
     from rlfd_drake.baselines.episodic import BaselineConfig, train_baseline
 
-    out = Path("runs") / "reproduce" / f"{task}_{method}_{mode}_e{episodes}_s{seed}"
-    policy = out / "baseline.npz"
+    policy = _baseline_path(method, task, mode, episodes, seed)
+    out = policy.parent
     if not policy.exists():
         if out.exists():  # an interrupted run: its partial files are not a result
             for path in out.iterdir():
@@ -413,10 +420,12 @@ def _evaluation(
     stochastic: bool = False,
     composition: str = "residual",
     required: tuple[str, ...] = (),
-) -> dict:
+    available: bool = True,
+) -> dict | None:
     """The evaluation of ``policy`` on ``task``, reusing a stored one of the same size,
     seed, composition and residual bounds that has the ``required`` keys (figures
-    added to evaluations after it was stored)."""
+    added to evaluations after it was stored); None when there is no such stored
+    evaluation and the policy is not ``available`` (a run folder of another machine)."""
     from rlfd_drake.evaluate import evaluate, result_from_json, write_evaluation
 
     path = results_dir() / f"{name}.json"
@@ -432,6 +441,8 @@ def _evaluation(
         )
         if same:
             return stored
+    if not available:
+        return None
     print(f"  evaluating {name} ({episodes} episodes)", flush=True)
     result = evaluate(
         task,
@@ -457,22 +468,38 @@ def _cell(
         return {"status": "not run", "reason": detail}
     if kind == "dmp":
         policy, label, trained = "dmp", "dmp", None
+        missing = ""
     elif kind == "random":
         policy, label, trained = "random", "random", None
+        missing = ""
     elif kind == "policy":
         policy = str(models_dir() / detail)
         label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
+        missing = f"no policy at {policy}"
     elif kind == "run":
         folder, command = RUNS[detail][task]
         run = Path(folder)
-        if not (run / "policy.zip").exists():
-            return {"status": "not run", "reason": f"no policy in {run} (train it: {command})"}
-        metrics = json.loads((run / "metrics.json").read_text())
-        policy, label, trained = str(run / "policy.zip"), run.name, metrics.get("episodes")
+        # Run folders stay local; their logs are copied to results/train_<name>/, so a
+        # fresh clone still finds the episode count (and its stored evaluations below).
+        metrics_file = next(
+            (
+                m
+                for m in (
+                    run / "metrics.json",
+                    results_dir() / f"train_{run.name}" / "metrics.json",
+                )
+                if m.exists()
+            ),
+            None,
+        )
+        trained = json.loads(metrics_file.read_text()).get("episodes") if metrics_file else None
+        policy, label = str(run / "policy.zip"), run.name
+        missing = f"no policy in {run} (train it: {command})"
     elif kind == "baseline":
         train_task = row.train_task or task
-        run = _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
+        run = _baseline_path(detail, train_task, row.residual_mode, train_episodes, seed)
         policy, label, trained = str(run), run.parent.name, train_episodes
+        missing = "trained below"
     else:
         raise ValueError(f"row {row.label!r} has an unknown source {row.source!r}")
     mode = "" if row.residual_mode == "full" else f"_{row.residual_mode}"
@@ -483,18 +510,29 @@ def _cell(
         eval_mode = "full"
     mode += "_stochastic" if row.stochastic else ""
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
-    result = _evaluation(
-        task,
-        policy,
-        name,
-        eval_mode,
-        eval_episodes,
-        seed,
-        workers,
-        row.stochastic,
-        row.composition,
-        required=_METRIC_KEYS.get(metric, ()),
-    )
+
+    def evaluation(available: bool) -> dict | None:
+        return _evaluation(
+            task,
+            policy,
+            name,
+            eval_mode,
+            eval_episodes,
+            seed,
+            workers,
+            row.stochastic,
+            row.composition,
+            required=_METRIC_KEYS.get(metric, ()),
+            available=available,
+        )
+
+    # A stored evaluation is reused even where the policy is not on this machine.
+    result = evaluation(not missing or Path(policy.split("|")[0]).exists())
+    if result is None and kind == "baseline":
+        _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
+        result = evaluation(True)
+    if result is None:
+        return {"status": "not run", "reason": missing}
     by_outcome = result.get("forces_by_outcome", {})
     return {
         "status": "measured",

@@ -21,7 +21,10 @@ def _fake_evaluation(
     stochastic=False,
     composition="residual",
     required=(),
+    available=True,
 ):
+    if not available:
+        return None
     rate = {"dmp": 0.5, "random": 0.6}.get(policy, 0.7)
     return {
         "success_rate": rate,
@@ -150,14 +153,14 @@ def test_linear_random_row_splits_translation_and_orientation(tmp_path, monkeypa
         return _fake_evaluation(*args, **kwargs)
 
     monkeypatch.setattr(reproduce, "_evaluation", recording)
-    monkeypatch.setattr(
-        reproduce,
-        "_baseline_run",
-        lambda method, task, *a: Path(f"runs/{task}_{method}/baseline.npz"),
-    )
+    for function in ("_baseline_run", "_baseline_path"):
+        monkeypatch.setattr(
+            reproduce, function, lambda method, task, *a: Path(f"runs/{task}_{method}/baseline.npz")
+        )
     reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    # (A baseline not on disk is first looked up among the stored evaluations.)
     split = [c for c in calls if c[1].endswith("|random")]
-    assert [c[0] for c in split] == ["peg", "gear", "rj45"]
+    assert list(dict.fromkeys(c[0] for c in split)) == ["peg", "gear", "rj45"]
     assert split[0][1] == "runs/peg_linear/baseline.npz|random"
     assert all(c[3] == "full" for c in split)  # the composer runs both parts
     assert "random_orientation" in split[0][2]
@@ -223,3 +226,37 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
         required=("peak_joint_contact_torque_nm",),
     )
     assert len(fresh) == 2
+
+
+def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp_path, monkeypatch):
+    """Run folders are local: without one, its stored evaluation and its training log
+    in results/ still fill the row, and nothing is evaluated anew for it."""
+    from rlfd_drake import evaluate as evaluate_module
+    from rlfd_drake.results import write_result
+
+    monkeypatch.chdir(tmp_path)
+    evaluated = []
+
+    def fake_evaluate(task, policy, episodes, seed, **kwargs):
+        evaluated.append(policy)
+        return _fake_evaluation(task, policy, "", "", episodes, seed, 1)
+
+    monkeypatch.setattr(evaluate_module, "evaluate", fake_evaluate)
+    monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    stored = _fake_evaluation("gear", "stored", "", "", 40, 0, 1)
+    stored.update(success_rate=0.9, seed=0, residual_bounds=reproduce._bounds("gear"))
+    write_result("eval_gear_gear_sac_te1_s0_n40_s0", stored, seed=0)
+    train_log = tmp_path / "results" / "train_gear_sac_te1_s0"
+    train_log.mkdir(parents=True)
+    (train_log / "metrics.json").write_text(json.dumps({"episodes": 300}))
+    data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    rows = {row["label"]: row["ours"] for row in data["rows"]}
+    gear = rows["SAC / SAC (rLfD), mean action"]["gear"]
+    assert gear["status"] == "measured" and gear["training_episodes"] == 300
+    assert gear["success_pct"] == pytest.approx(90.0)
+    sampled = rows["SAC / SAC (rLfD), sampled actions"]["gear"]
+    assert sampled["status"] == "not run" and "rlfd train --task gear" in sampled["reason"]
+    assert not [policy for policy in evaluated if "sac_te1" in policy]

@@ -36,6 +36,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
+from rlfd_drake.bench.python_floor import AddPythonFloorProbes
 from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import BuildRlfdDiagram, RlfdDiagram, SetEpisodeStart
 from rlfd_drake.dmp import fit_cartesian_dmp
@@ -141,15 +142,28 @@ def _record_torques(
 
 
 def _time_replay(
-    task: TaskSpec, rlfd: RlfdDiagram, times: np.ndarray, torques: np.ndarray, q0: np.ndarray
+    task: TaskSpec,
+    rlfd: RlfdDiagram,
+    times: np.ndarray,
+    torques: np.ndarray,
+    q0: np.ndarray,
+    python_probes: bool = False,
 ) -> tuple[float, np.ndarray]:
-    """Wall time (s) of the plant alone replaying ``torques``; q at the end (7,)."""
+    """Wall time (s) of the plant alone replaying ``torques``; q at the end (7,).
+
+    With ``python_probes`` the do-nothing Python systems of
+    :mod:`rlfd_drake.bench.python_floor` run beside it (same rates, same pulls).
+    """
     builder = DiagramBuilder()
     scene = AddRlfdScene(builder, task, rlfd.config.scene)
     source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(times, torques)))
     builder.Connect(source.get_output_port(), scene.plant.get_actuation_input_port(scene.panda))
+    if python_probes:
+        AddPythonFloorProbes(builder, scene)
     diagram = builder.Build()
     simulator = Simulator(diagram)
+    if python_probes:
+        diagram.GetInputPort("residual").FixValue(simulator.get_mutable_context(), np.zeros(6))
     plant_context = scene.plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
     scene.plant.SetPositions(plant_context, scene.panda, q0)
     simulator.Initialize()
@@ -214,7 +228,10 @@ def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "p
     "success", "distance_to_goal_m", "peak_contact_force_n"}, "profile": {...}}``:
     medians over ``repeats`` of the wall time of the complete diagram (t_full) and of
     the plant replaying the same torques (t_plant, see the module docstring);
-    ``overhead_fraction = (t_full - t_plant) / t_plant``. ``profile`` is
+    ``overhead_fraction = (t_full - t_plant) / t_plant``;
+    ``python_floor_overhead_fraction`` is the same for the plant with the do-nothing
+    Python probes of :mod:`rlfd_drake.bench.python_floor` (t_floor): the part of the
+    overhead that is Drake's Python dispatch, not our systems' work. ``profile`` is
     :func:`profile_episode` of ``profile_task``.
     """
     if repeats < 1:
@@ -225,7 +242,7 @@ def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "p
             task = load_task(name)
             rlfd, X_WP_start = _build(task)
             times, torques, q0, q_end = _record_torques(rlfd, X_WP_start)
-            full, plant = [], []
+            full, plant, floor = [], [], []
             outcome: dict = {}
             replay_error = 0.0
             for _ in range(repeats):
@@ -234,13 +251,18 @@ def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "p
                 wall, q_replay = _time_replay(task, rlfd, times, torques, q0)
                 plant.append(wall)
                 replay_error = float(np.max(np.abs(q_replay - q_end)))
+                wall, _ = _time_replay(task, rlfd, times, torques, q0, python_probes=True)
+                floor.append(wall)
             t_full, t_plant = statistics.median(full), statistics.median(plant)
+            t_floor = statistics.median(floor)
             results[name] = {
                 "real_time_factor": EPISODE_S / t_full,
                 "plant_real_time_factor": EPISODE_S / t_plant,
                 "overhead_fraction": (t_full - t_plant) / t_plant,
+                "python_floor_overhead_fraction": (t_floor - t_plant) / t_plant,
                 "full_wall_s": t_full,
                 "plant_wall_s": t_plant,
+                "python_floor_wall_s": t_floor,
                 "replay_max_q_error_rad": replay_error,
                 **outcome,
             }
