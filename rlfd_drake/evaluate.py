@@ -19,6 +19,7 @@ Policies are named by a string, so that worker processes can build their own:
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import multiprocessing
@@ -197,6 +198,38 @@ def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
 
 def _binomial_std(p: float, n: int) -> float:
     return math.sqrt(p * (1.0 - p) / n) if n > 0 else float("nan")
+
+
+#: Edges (mm) of the fixture position error groups of :func:`success_by_fixture_error`.
+FIXTURE_ERROR_EDGES_MM = (0.0, 1.0, 2.0, 3.0, math.inf)
+
+
+def success_by_fixture_error(
+    result: dict, edges_mm: tuple[float, ...] = FIXTURE_ERROR_EDGES_MM
+) -> list[dict]:
+    """Success in groups of the unseen fixture position error |dp| (mm), from an
+    evaluation's episode table (so stored evaluations can be regrouped): a list of
+    ``{"from_mm", "to_mm", "n", "success_rate"}``, empty groups left out. It tells
+    whether a residual searches (success where the DMP's landing misses the hole) or
+    only keeps the DMP's successes."""
+    if len(edges_mm) < 2 or any(b <= a for a, b in itertools.pairwise(edges_mm)):
+        raise ValueError(f"edges_mm must increase, got {edges_mm}")
+    table = result["episode_table"]
+    error = np.asarray(table["fixture_error_mm"], dtype=float)
+    success = np.asarray(table["success"], dtype=float)
+    groups = []
+    for low, high in itertools.pairwise(edges_mm):
+        mask = (error >= low) & (error < high)
+        if np.any(mask):
+            groups.append(
+                {
+                    "from_mm": low,
+                    "to_mm": high,
+                    "n": int(mask.sum()),
+                    "success_rate": float(success[mask].mean()),
+                }
+            )
+    return groups
 
 
 def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeResult]) -> dict:
@@ -419,6 +452,16 @@ def evaluation_markdown(result: dict) -> str:
         lines.append(
             f"| {b['bin']} | {b['n']} | {_fmt(b['success_rate'], 100)} | "
             f"{_fmt(b['position_offset_m'], 1e3)} | {_fmt(b['rotation_offset_deg'])} |"
+        )
+    lines += [
+        "",
+        "| unseen fixture error mm | n | success % |",
+        "|---|---|---|",
+    ]
+    for group in success_by_fixture_error(r):
+        lines.append(
+            f"| {group['from_mm']:g} to {group['to_mm']:g} | {group['n']} | "
+            f"{_fmt(group['success_rate'], 100)} |"
         )
     failures = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "none"
     lines += ["", f"Failures: {failures}. Wall time {r['wall_time_s']:.0f} s.", ""]

@@ -14,6 +14,7 @@ from rlfd_drake.evaluate import (
     _success_curve,
     evaluate,
     make_policy,
+    success_by_fixture_error,
     write_evaluation,
 )
 from rlfd_drake.policies import DeployedPolicy, _sb3_kind_from_zip, load_sb3_model
@@ -67,6 +68,7 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
     assert record["data"]["success_rate"] == dmp_result["success_rate"]
     markdown = paths["md"].read_text()
     assert "| task | policy | success % |" in markdown and "peg_easy" in markdown
+    assert "| unseen fixture error mm | n | success % |" in markdown
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"
     assert all(p.stat().st_size < 100_000 for p in paths.values())
 
@@ -89,6 +91,25 @@ def test_success_curve_of_binned_results():
     np.testing.assert_allclose(p, 1.0 - 0.1 * np.arange(8))
     np.testing.assert_allclose(std, np.sqrt(p * (1 - p) / 20))
     assert "rotation" in label and list(n) == [20] * 8
+
+
+def test_success_by_fixture_error_groups_the_episodes():
+    result = {
+        "episode_table": {
+            "fixture_error_mm": [0.5, 0.9, 1.5, 2.5, 2.9, 4.0],
+            "success": [1, 1, 0, 1, 0, 0],
+        }
+    }
+    groups = success_by_fixture_error(result)
+    assert [(g["from_mm"], g["n"], g["success_rate"]) for g in groups] == [
+        (0.0, 2, 1.0),
+        (1.0, 1, 0.0),
+        (2.0, 2, 0.5),
+        (3.0, 1, 0.0),
+    ]
+    assert len(success_by_fixture_error(result, (0.0, 1.0))) == 1  # the rest left out
+    with pytest.raises(ValueError, match="edges_mm"):
+        success_by_fixture_error(result, (0.0, 2.0, 1.0))
 
 
 def test_random_policy_masks_and_seed():
