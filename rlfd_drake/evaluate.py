@@ -38,7 +38,7 @@ from rlfd_drake.episode import (
     make_episode_specs,
     run_episode,
 )
-from rlfd_drake.policies import DeployedPolicy, load_sb3_model
+from rlfd_drake.policies import DeployedPolicy, check_residual_mode, load_sb3_model
 from rlfd_drake.results import results_dir, write_result
 from rlfd_drake.tasks import TaskSpec, load_task
 
@@ -367,6 +367,11 @@ def evaluate(
     if workers <= 0:
         raise ValueError(f"workers must be positive, got {workers}")
     task = load_task(task_name)
+    parts = policy_spec.split("|")
+    part_modes = [residual_mode] if len(parts) == 1 else ["translation", "orientation"]
+    for part, mode in zip(parts, part_modes, strict=False):
+        if part.endswith(".zip"):
+            check_residual_mode(part.partition(":")[2] or part, mode)
     config = replace(
         diagram_config if diagram_config is not None else RlfdDiagramConfig(),
         residual_mode=residual_mode,

@@ -87,6 +87,46 @@ def _optimizers(model) -> list:
     return found
 
 
+#: The parts of the residual each composer mode corrects.
+_MODE_PARTS = {
+    "full": {"translation", "orientation"},
+    "translation": {"translation"},
+    "orientation": {"orientation"},
+    "off": set(),
+}
+
+
+def check_residual_mode(policy_path: str | Path, residual_mode: str) -> None:
+    """Refuses to run a policy saved in a run folder in a mode that applies parts of
+    the residual it was not trained to set (e.g. a translation-only policy in "full"
+    mode: its untrained orientation outputs would tilt the part). The training mode
+    is read from the ``config.json`` that ``rlfd train`` writes beside ``policy.zip``;
+    a policy without one is not checked.
+
+    Raises:
+        ValueError: ``residual_mode`` is unknown or corrects a part the policy was not
+            trained on.
+    """
+    if residual_mode not in _MODE_PARTS:
+        raise ValueError(
+            f"residual_mode must be one of {sorted(_MODE_PARTS)}, got {residual_mode!r}"
+        )
+    config_file = Path(policy_path).with_name("config.json")
+    if not config_file.exists():
+        return
+    try:
+        trained = json.loads(config_file.read_text())["config"]["residual_mode"]
+    except (KeyError, TypeError, ValueError):
+        return  # not a run folder's config
+    extra = _MODE_PARTS[residual_mode] - _MODE_PARTS.get(trained, set())
+    if extra:
+        raise ValueError(
+            f"residual_mode {residual_mode!r} applies the {' and '.join(sorted(extra))} of "
+            f"{policy_path}, which was trained with residual_mode {trained!r} "
+            f"({config_file}); evaluate it with --residual-mode {trained}"
+        )
+
+
 def export_policy(source: str | Path, destination: str | Path, overwrite: bool = False) -> Path:
     """Writes a deployment copy of a trained SB3 model: the same networks (so the same
     actions) without the optimizers' moment estimates, which are as large as the

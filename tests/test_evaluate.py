@@ -17,7 +17,12 @@ from rlfd_drake.evaluate import (
     success_by_fixture_error,
     write_evaluation,
 )
-from rlfd_drake.policies import DeployedPolicy, _sb3_kind_from_zip, load_sb3_model
+from rlfd_drake.policies import (
+    DeployedPolicy,
+    _sb3_kind_from_zip,
+    check_residual_mode,
+    load_sb3_model,
+)
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
 
 
@@ -196,3 +201,22 @@ def test_split_spec_takes_translation_and_orientation_from_different_policies():
         make_policy("dmp|random|random")
     with pytest.raises(ValueError, match="needs the task"):
         make_policy("runs/x/baseline.npz|random")
+
+
+def test_a_translation_only_policy_is_refused_in_full_mode(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    policy = run / "policy.zip"
+    policy.write_bytes(b"")
+    (run / "config.json").write_text(json.dumps({"config": {"residual_mode": "translation"}}))
+    with pytest.raises(ValueError, match="trained with residual_mode 'translation'"):
+        evaluate("peg_easy", str(policy), 1, 0, workers=1, residual_mode="full")
+    with pytest.raises(ValueError, match="orientation"):
+        check_residual_mode(policy, "orientation")
+    check_residual_mode(policy, "translation")
+    check_residual_mode(policy, "off")
+    with pytest.raises(ValueError, match="residual_mode must be one of"):
+        check_residual_mode(policy, "sideways")
+    # Without a run folder's config there is nothing to check against.
+    (run / "config.json").unlink()
+    check_residual_mode(policy, "full")
