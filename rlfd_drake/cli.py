@@ -338,17 +338,25 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def _policy_stem(spec: str) -> str:
-    """A file-name stem for a policy spec: a baseline's run folder (its file is always
-    baseline.npz), a model's file stem, "a_and_b" for a translation|orientation split."""
+    """A file-name stem for a policy spec: the run folder of a file ``rlfd train`` or a
+    baseline always names the same (policy.zip, baseline.npz), else the file's stem;
+    "a_and_b" for a translation|orientation split."""
     if "|" in spec:
         return "_and_".join(_policy_stem(part) for part in spec.split("|"))
-    path = Path(spec)
-    return path.parent.name if path.suffix == ".npz" else path.stem
+    path = Path(spec.partition(":")[2] if ":" in spec else spec)
+    return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from rlfd_drake.evaluate import evaluate, write_evaluation
+    from rlfd_drake.results import results_dir
 
+    mode = "" if args.residual_mode == "full" else f"_{args.residual_mode}"
+    mode += "_stochastic" if args.stochastic else ""
+    name = args.name or f"eval_{args.task}_{_policy_stem(args.policy)}{mode}_s{args.seed}"
+    existing = results_dir() / f"{name}.json"
+    if existing.exists() and not args.overwrite:
+        raise FileExistsError(f"{existing} exists; pass --overwrite or --name to keep both")
     result = evaluate(
         args.task,
         args.policy,
@@ -360,8 +368,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         deterministic=not args.stochastic,
         composition=args.composition,
     )
-    mode = "_stochastic" if args.stochastic else ""
-    name = args.name or f"eval_{args.task}_{_policy_stem(args.policy)}{mode}_s{args.seed}"
     paths = write_evaluation(result, name)
     if args.json:
         _print_json(result)
@@ -539,6 +545,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="how the policy was trained to act (see rlfd train --composition)",
     )
     evaluate.add_argument("--name", help="results file stem")
+    evaluate.add_argument(
+        "--overwrite", action="store_true", help="replace an existing result of the same name"
+    )
     evaluate.add_argument("--json", action="store_true", help="print the JSON result")
     evaluate.set_defaults(func=_cmd_evaluate)
 

@@ -49,5 +49,18 @@ def test_evaluation_file_names_of_policy_specs():
     from rlfd_drake.cli import _policy_stem
 
     assert _policy_stem("runs/peg_linear_s0/baseline.npz") == "peg_linear_s0"
-    assert _policy_stem("runs/peg_sac_s0/policy.zip") == "policy"
+    assert _policy_stem("runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
+    assert _policy_stem("sac:runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
+    assert _policy_stem("models/policies/peg_easy_sac.zip") == "peg_easy_sac"
     assert _policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
+
+
+def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    stored = tmp_path / "results" / "eval_peg_easy_dmp_translation_s0.json"
+    stored.parent.mkdir()
+    stored.write_text("{}")
+    argv = ["evaluate", "--policy", "dmp", "--episodes", "1", "--residual-mode", "translation"]
+    assert main(argv) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
+    assert stored.read_text() == "{}"
