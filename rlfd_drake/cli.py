@@ -122,7 +122,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
     from pydrake.geometry import Meshcat
 
-    from rlfd_drake.diagram import NominalGoal
+    from rlfd_drake.diagram import NominalGoal, RlfdDiagramConfig
     from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
     from rlfd_drake.evaluate import make_policy
     from rlfd_drake.tasks import load_task
@@ -145,7 +145,9 @@ def _cmd_view(args: argparse.Namespace) -> int:
             f"--policy must be dmp, random or a saved policy .zip, got {args.policy!r} "
             "(no such file)"
         )
-    policy = make_policy(args.policy, episode_seed=args.seed)
+    # The parts of the residual the policy was trained to set (see rlfd evaluate).
+    residual_mode = _trained_mode(args.policy)
+    policy = make_policy(args.policy, residual_mode, episode_seed=args.seed)
     dmp_model = load_task_dmp(task)
     spec = make_episode_specs(task, 1, args.seed, grid=False)[0]
     meshcat = Meshcat()
@@ -156,6 +158,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
         dmp_model,
         spec,
         policy,
+        diagram_config=RlfdDiagramConfig(residual_mode=residual_mode),
         meshcat=meshcat,
         record_html=html,
         realtime_rate=None if html is not None else args.realtime_rate,
@@ -187,6 +190,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     and a Meshcat HTML replay of one rLfD episode."""
     from pydrake.geometry import Meshcat
 
+    from rlfd_drake.diagram import RlfdDiagramConfig
     from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
     from rlfd_drake.evaluate import evaluate, make_policy, write_evaluation
     from rlfd_drake.paths import models_dir
@@ -198,6 +202,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     print(f"[1/4] fitted the DMP on {task.demo_path().name} ({task.name})")
     policy_path = models_dir() / SHIPPED_POLICY
     policies = ["dmp"] + ([str(policy_path)] if policy_path.exists() else [])
+    residual_mode = _trained_mode(str(policy_path))
     if len(policies) == 1:
         print(f"      no trained residual at {policy_path}: running the DMP alone")
     rows = {}
@@ -205,7 +210,13 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
         label = "DMP only" if spec == "dmp" else "rLfD (DMP + residual)"
         print(f"[{step}/4] {label} on {args.episodes} perturbed starts (seed {args.seed})")
         result = evaluate(
-            task.name, spec, args.episodes, args.seed, workers=args.workers, grid=False
+            task.name,
+            spec,
+            args.episodes,
+            args.seed,
+            workers=args.workers,
+            grid=False,
+            residual_mode=residual_mode,
         )
         write_evaluation(result, f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}")
         rows[label] = result
@@ -223,7 +234,13 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     meshcat = Meshcat()
     html = results_dir() / f"demo_{task.name}_replay.html"
     replay = run_episode(
-        task, dmp_model, spec, make_policy(policies[-1]), meshcat=meshcat, record_html=html
+        task,
+        dmp_model,
+        spec,
+        make_policy(policies[-1], residual_mode),
+        diagram_config=RlfdDiagramConfig(residual_mode=residual_mode),
+        meshcat=meshcat,
+        record_html=html,
     )
     write_result(
         f"demo_{task.name}",
@@ -347,10 +364,22 @@ def _policy_stem(spec: str) -> str:
     return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
 
 
+def _trained_mode(policy_spec: str) -> str:
+    """The residual mode a saved policy was trained with ("full" if unknown or not a
+    single saved policy)."""
+    from rlfd_drake.policies import trained_residual_mode
+
+    if "|" in policy_spec or not policy_spec.endswith(".zip"):
+        return "full"
+    return trained_residual_mode(policy_spec.partition(":")[2] or policy_spec) or "full"
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from rlfd_drake.evaluate import evaluate, write_evaluation
     from rlfd_drake.results import results_dir
 
+    if args.residual_mode is None:
+        args.residual_mode = _trained_mode(args.policy)
     mode = "" if args.residual_mode == "full" else f"_{args.residual_mode}"
     mode += "_stochastic" if args.stochastic else ""
     name = args.name or f"eval_{args.task}_{_policy_stem(args.policy)}{mode}_s{args.seed}"
@@ -530,7 +559,11 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--seed", type=int, default=0)
     evaluate.add_argument("--workers", type=int, default=2)
     evaluate.add_argument(
-        "--residual-mode", choices=["full", "translation", "orientation"], default="full"
+        "--residual-mode",
+        choices=["full", "translation", "orientation"],
+        default=None,
+        help="the parts of the residual applied (default: what the policy was trained "
+        "with, from its saved training configuration; else full)",
     )
     evaluate.add_argument(
         "--random-starts", action="store_true", help="sample starts instead of the grid"

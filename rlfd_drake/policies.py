@@ -96,12 +96,35 @@ _MODE_PARTS = {
 }
 
 
+def training_config_file(policy_path: str | Path) -> Path | None:
+    """The training configuration saved with a policy: ``<name>.json`` beside it (what
+    ``rlfd export`` writes), or the run folder's ``config.json`` beside a
+    ``policy.zip``; None if there is neither."""
+    path = Path(policy_path)
+    for candidate in (path.with_suffix(".json"), path.with_name("config.json")):
+        if candidate.exists() and (candidate.name != "config.json" or path.name == "policy.zip"):
+            return candidate
+    return None
+
+
+def trained_residual_mode(policy_path: str | Path) -> str | None:
+    """The ``residual_mode`` a policy was trained with, from its training configuration
+    (see :func:`training_config_file`), or None if unknown."""
+    config_file = training_config_file(policy_path)
+    if config_file is None:
+        return None
+    try:
+        mode = json.loads(config_file.read_text())["config"]["residual_mode"]
+    except (KeyError, TypeError, ValueError):
+        return None  # not a training configuration
+    return mode if mode in _MODE_PARTS else None
+
+
 def check_residual_mode(policy_path: str | Path, residual_mode: str) -> None:
-    """Refuses to run a policy saved in a run folder in a mode that applies parts of
-    the residual it was not trained to set (e.g. a translation-only policy in "full"
-    mode: its untrained orientation outputs would tilt the part). The training mode
-    is read from the ``config.json`` that ``rlfd train`` writes beside ``policy.zip``;
-    a policy without one is not checked.
+    """Refuses to run a policy in a mode that applies parts of the residual it was not
+    trained to set (e.g. a translation-only policy in "full" mode: its untrained
+    orientation outputs would tilt the part). A policy whose training configuration is
+    unknown is not checked.
 
     Raises:
         ValueError: ``residual_mode`` is unknown or corrects a part the policy was not
@@ -111,19 +134,15 @@ def check_residual_mode(policy_path: str | Path, residual_mode: str) -> None:
         raise ValueError(
             f"residual_mode must be one of {sorted(_MODE_PARTS)}, got {residual_mode!r}"
         )
-    config_file = Path(policy_path).with_name("config.json")
-    if not config_file.exists():
+    trained = trained_residual_mode(policy_path)
+    if trained is None:
         return
-    try:
-        trained = json.loads(config_file.read_text())["config"]["residual_mode"]
-    except (KeyError, TypeError, ValueError):
-        return  # not a run folder's config
-    extra = _MODE_PARTS[residual_mode] - _MODE_PARTS.get(trained, set())
+    extra = _MODE_PARTS[residual_mode] - _MODE_PARTS[trained]
     if extra:
         raise ValueError(
             f"residual_mode {residual_mode!r} applies the {' and '.join(sorted(extra))} of "
             f"{policy_path}, which was trained with residual_mode {trained!r} "
-            f"({config_file}); evaluate it with --residual-mode {trained}"
+            f"({training_config_file(policy_path)}); use residual mode {trained!r}"
         )
 
 
@@ -131,7 +150,8 @@ def export_policy(source: str | Path, destination: str | Path, overwrite: bool =
     """Writes a deployment copy of a trained SB3 model: the same networks (so the same
     actions) without the optimizers' moment estimates, which are as large as the
     networks and only matter for continuing training (use the run folder's
-    checkpoints for that).
+    checkpoints for that). The run's training configuration, if any, is copied beside
+    it as ``<destination stem>.json``.
 
     Raises:
         FileExistsError: ``destination`` exists and ``overwrite`` is False.
@@ -141,10 +161,17 @@ def export_policy(source: str | Path, destination: str | Path, overwrite: bool =
         raise FileExistsError(f"{destination} exists; pass overwrite=True to replace it")
     if destination.suffix != ".zip":
         raise ValueError(f"destination must end in .zip, got {str(destination)!r}")
+    config_file = training_config_file(source)
+    sidecar = destination.with_suffix(".json")
+    if config_file is not None and sidecar.exists() and not overwrite:
+        raise FileExistsError(f"{sidecar} exists; pass overwrite=True to replace it")
     model, _ = load_sb3_model(source)
     for optimizer in _optimizers(model):
         optimizer.state.clear()
     model.save(destination)
+    if config_file is not None:
+        # The training configuration travels with the policy (its residual mode above all).
+        sidecar.write_text(config_file.read_text())
     return destination
 
 

@@ -64,3 +64,16 @@ def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, ca
     assert main(argv) == 2
     assert "exists; pass --overwrite" in capsys.readouterr().err
     assert stored.read_text() == "{}"
+
+
+def test_saved_policies_run_in_the_residual_mode_they_were_trained_with(tmp_path):
+    from rlfd_drake.cli import _trained_mode
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "policy.zip").write_bytes(b"")
+    assert _trained_mode(str(run / "policy.zip")) == "full"  # unknown
+    (run / "config.json").write_text(json.dumps({"config": {"residual_mode": "translation"}}))
+    assert _trained_mode(str(run / "policy.zip")) == "translation"
+    assert _trained_mode(f"sac:{run / 'policy.zip'}") == "translation"
+    assert _trained_mode("dmp") == "full"

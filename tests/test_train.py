@@ -99,6 +99,24 @@ def test_exported_policy_acts_the_same_and_is_smaller(tmp_path):
         export_policy(tmp_path / "policy.zip", exported)
 
 
+def test_export_carries_the_training_configuration(tmp_path):
+    from rlfd_drake.policies import export_policy, trained_residual_mode
+
+    run = tmp_path / "run"
+    run.mkdir()
+    model = make_model(TrainConfig(algo="sac", envs=1, history=1), fast_venv(), None)
+    model.save(run / "policy.zip")
+    config = {"config": {"residual_mode": "translation"}, "command": "rlfd train ..."}
+    (run / "config.json").write_text(json.dumps(config))
+    assert trained_residual_mode(run / "policy.zip") == "translation"
+    exported = export_policy(run / "policy.zip", tmp_path / "shipped.zip")
+    assert json.loads((tmp_path / "shipped.json").read_text()) == config
+    assert trained_residual_mode(exported) == "translation"
+    # A config.json beside another policy file is not that policy's.
+    (run / "other.zip").write_bytes(b"")
+    assert trained_residual_mode(run / "other.zip") is None
+
+
 def test_sac_target_entropy_reaches_the_model():
     default = make_model(TrainConfig(algo="sac", envs=1, history=1), fast_venv(), None)
     assert default.target_entropy == -6.0  # SB3's -dim(A)
