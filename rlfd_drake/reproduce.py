@@ -32,7 +32,12 @@ import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from rlfd_drake.paths import SHIPPED_POLICY, SHIPPED_PPO_POLICY, models_dir
+from rlfd_drake.paths import (
+    SHIPPED_FULL_POSE_POLICY,
+    SHIPPED_POLICY,
+    SHIPPED_PPO_POLICY,
+    models_dir,
+)
 from rlfd_drake.results import results_dir, write_result
 
 __all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table"]
@@ -40,7 +45,7 @@ __all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table"]
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
 #: Training episodes of the shipped policies (models/policies/README.md).
-_SHIPPED_EPISODES = {SHIPPED_POLICY: 700, SHIPPED_PPO_POLICY: 700}
+_SHIPPED_EPISODES = {SHIPPED_POLICY: 700, SHIPPED_FULL_POSE_POLICY: 700, SHIPPED_PPO_POLICY: 700}
 
 
 @dataclass(frozen=True)
@@ -150,17 +155,6 @@ RUNS: dict[str, dict[str, tuple[str, str]]] = {
             f"{_SAC_PEG_RECIPE} --force-limit-n 50",
         ),
     ),
-    # Table I's rLfD as the paper trains it: translation-only residuals ("the task with
-    # a larger hole could be solved using only translation-based corrections").
-    "sac_translation": dict.fromkeys(
-        ("peg_easy", "peg_hard"),
-        _run(
-            "runs/peg_easy_sac_translation_s0",
-            "peg_easy",
-            700,
-            f"{_SAC_PEG_RECIPE} --residual-mode translation",
-        ),
-    ),
 }
 # Table IV's PPO / None: translation-only residuals (300 episodes: what fits a session;
 # the paper trains 500).
@@ -204,9 +198,14 @@ def _mean_and_sampled(
     ]
 
 
-#: The shipped rLfD policy, trained on the easy hole (Tables I-III).
+#: The shipped rLfD policy, trained on the easy hole (Tables I-III): translation only,
+#: as the paper's ("the task with a larger hole could be solved using only
+#: translation-based corrections").
 _SHIPPED_SAC = Row(
-    "rLfD SAC (shipped), mean action", f"policy:{SHIPPED_POLICY}", {"easy": 94.8, "hard": 55.0}
+    "rLfD SAC, translation (shipped), mean action",
+    f"policy:{SHIPPED_POLICY}",
+    {"easy": 94.8, "hard": 55.0},
+    residual_mode="translation",
 )
 
 TABLES: dict[str, Table] = {
@@ -233,25 +232,28 @@ TABLES: dict[str, Table] = {
                 {"easy": 32.2, "hard": 14.4},
                 train_task="peg_easy",
             ),
-            replace(_SHIPPED_SAC, label="D  rLfD SAC (shipped), mean action"),
-            replace(_SHIPPED_SAC, label="D  rLfD SAC (shipped), sampled actions", stochastic=True),
+            *_mean_and_sampled(
+                "D  rLfD SAC, translation (shipped)",
+                f"policy:{SHIPPED_POLICY}",
+                {"easy": 94.8, "hard": 55.0},
+                residual_mode="translation",
+            ),
+            *_mean_and_sampled(
+                "D  rLfD SAC, full pose (earlier shipped policy)",
+                f"policy:{SHIPPED_FULL_POSE_POLICY}",
+                {"easy": None, "hard": None},
+            ),
             *_mean_and_sampled(
                 "D  rLfD SAC, 50 N force limit in training",
                 "run:sac_force_limited",
                 {"easy": None, "hard": None},
             ),
-            *_mean_and_sampled(
-                "D  rLfD SAC, translation only (the paper's Table I residual)",
-                "run:sac_translation",
-                {"easy": 94.8, "hard": 55.0},
-                residual_mode="translation",
-            ),
         ],
         "Baselines are trained on peg_easy and evaluated on both holes, as in the paper. "
-        "The shipped residual corrects the full pose; the paper's Table I residual "
-        "corrects translation only (the last two rows). The two rows before them are "
-        "not in the paper: the shipped recipe trained with episodes ending at a 50 N "
-        "low-passed contact force (a collision reflex), evaluated without the limit.",
+        "rLfD corrects the translation only, as the paper's Table I residual. The "
+        "full-pose rows (the earlier shipped policy) and the 50 N rows (the full-pose "
+        "recipe trained with episodes ending at a 50 N low-passed contact force, a "
+        "collision reflex, evaluated without the limit) are not in the paper.",
     ),
     "2": Table(
         "Table II: adaptive policies in task space (simulation, trained on easy)",
