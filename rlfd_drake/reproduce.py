@@ -7,7 +7,8 @@ every (row, task) the command trains what is missing (run folders under
 ``runs/reproduce/``; an existing ``baseline.npz`` is reused, so an interrupted run
 resumes), evaluates it through :func:`rlfd_drake.evaluate.evaluate` on the task's
 evaluation grid (an existing ``results/eval_*`` file of the same episodes and seed is
-reused) and writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the
+reused, even where the policy itself is not on this machine: run folders are local,
+and a fresh clone keeps the committed evaluations instead of losing the rows) and writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the
 paper's numbers and ours.
 
 Tables: 1, 2, 3 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
@@ -488,10 +489,10 @@ def _cell(
         return {"status": "not run", "reason": detail}
     if kind == "dmp":
         policy, label, trained = "dmp", "dmp", None
-        missing = ""
+        missing = None  # nothing to look for on disk
     elif kind == "random":
         policy, label, trained = "random", "random", None
-        missing = ""
+        missing = None  # nothing to look for on disk
     elif kind == "policy":
         policy = str(models_dir() / detail)
         label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
@@ -519,7 +520,7 @@ def _cell(
         train_task = row.train_task or task
         run = _baseline_path(detail, train_task, row.residual_mode, train_episodes, seed)
         policy, label, trained = str(run), run.parent.name, train_episodes
-        missing = "trained below"
+        missing = "not trained"  # trained below when no stored evaluation has it
     else:
         raise ValueError(f"row {row.label!r} has an unknown source {row.source!r}")
     mode = "" if row.residual_mode == "full" else f"_{row.residual_mode}"
@@ -547,7 +548,7 @@ def _cell(
         )
 
     # A stored evaluation is reused even where the policy is not on this machine.
-    result = evaluation(not missing or Path(policy.split("|")[0]).exists())
+    result = evaluation(missing is None or Path(policy.split("|")[0]).exists())
     if result is None and kind == "baseline":
         _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
         result = evaluation(True)
