@@ -8,8 +8,9 @@ every (row, task) the command trains what is missing (run folders under
 resumes), evaluates it through :func:`rlfd_drake.evaluate.evaluate` on the task's
 evaluation grid (an existing ``results/eval_*`` file of the same episodes and seed is
 reused, even where the policy itself is not on this machine: run folders are local,
-and a fresh clone keeps the committed evaluations instead of losing the rows) and writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the
-paper's numbers and ours.
+and a fresh clone keeps the committed evaluations instead of losing the rows) and
+writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the paper's
+numbers and ours.
 
 Tables: 1, 2, 3 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
 insertion times), 6 (transfer between gear and RJ-45) and ``forces`` (peak contact
