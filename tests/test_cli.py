@@ -77,3 +77,14 @@ def test_saved_policies_run_in_the_residual_mode_they_were_trained_with(tmp_path
     assert _trained_mode(str(run / "policy.zip")) == "translation"
     assert _trained_mode(f"sac:{run / 'policy.zip'}") == "translation"
     assert _trained_mode("dmp") == "full"
+
+
+def test_the_shipped_policy_records_its_translation_only_training():
+    from rlfd_drake.cli import _trained_mode
+    from rlfd_drake.paths import SHIPPED_POLICY, models_dir
+    from rlfd_drake.policies import training_config_file
+
+    shipped = models_dir() / SHIPPED_POLICY
+    assert _trained_mode(str(shipped)) == "translation"  # what make demo runs it in
+    command = json.loads(training_config_file(shipped).read_text())["command"]
+    assert "--residual-mode translation" in command and "--task peg_easy" in command
