@@ -139,8 +139,9 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
         raise ValueError(f"--realtime-rate must be >= 0, got {args.realtime_rate}")
     task = load_task(args.task)
-    policy_file = Path(args.policy.partition(":")[2] or args.policy)
-    if args.policy not in ("dmp", "random") and not policy_file.is_file():
+    from rlfd_drake.policies import policy_file
+
+    if args.policy not in ("dmp", "random") and not policy_file(args.policy).is_file():
         raise ValueError(
             f"--policy must be dmp, random or a saved policy .zip, got {args.policy!r} "
             "(no such file)"
@@ -360,18 +361,20 @@ def _policy_stem(spec: str) -> str:
     "a_and_b" for a translation|orientation split."""
     if "|" in spec:
         return "_and_".join(_policy_stem(part) for part in spec.split("|"))
-    path = Path(spec.partition(":")[2] if ":" in spec else spec)
+    from rlfd_drake.policies import policy_file
+
+    path = policy_file(spec)
     return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
 
 
 def _trained_mode(policy_spec: str) -> str:
     """The residual mode a saved policy was trained with ("full" if unknown or not a
     single saved policy)."""
-    from rlfd_drake.policies import trained_residual_mode
+    from rlfd_drake.policies import policy_file, trained_residual_mode
 
     if "|" in policy_spec or not policy_spec.endswith(".zip"):
         return "full"
-    return trained_residual_mode(policy_spec.partition(":")[2] or policy_spec) or "full"
+    return trained_residual_mode(policy_file(policy_spec)) or "full"
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:

@@ -38,7 +38,12 @@ from rlfd_drake.episode import (
     make_episode_specs,
     run_episode,
 )
-from rlfd_drake.policies import DeployedPolicy, check_residual_mode, load_sb3_model
+from rlfd_drake.policies import (
+    DeployedPolicy,
+    check_residual_mode,
+    load_sb3_model,
+    policy_file,
+)
 from rlfd_drake.results import results_dir, write_result
 from rlfd_drake.tasks import TaskSpec, load_task
 
@@ -371,7 +376,7 @@ def evaluate(
     part_modes = [residual_mode] if len(parts) == 1 else ["translation", "orientation"]
     for part, mode in zip(parts, part_modes, strict=False):
         if part.endswith(".zip"):
-            check_residual_mode(part.partition(":")[2] or part, mode)
+            check_residual_mode(policy_file(part), mode)
     config = replace(
         diagram_config if diagram_config is not None else RlfdDiagramConfig(),
         residual_mode=residual_mode,

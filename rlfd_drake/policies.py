@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rlfd_drake.control_math import RESIDUAL_MODES
+
 #: Algorithm name -> (module, class) of its SB3 implementation.
 SB3_CLASSES = {
     "ppo": ("stable_baselines3", "PPO"),
@@ -42,6 +44,12 @@ def _sb3_kind_from_zip(path: Path) -> str | None:
     return None
 
 
+def policy_file(spec: str | Path) -> Path:
+    """The file of a saved-model spec ``path`` or ``kind:path`` (kind in SB3_CLASSES)."""
+    kind, _, rest = str(spec).partition(":")
+    return Path(rest) if rest and kind in SB3_CLASSES else Path(spec)
+
+
 def load_sb3_model(spec: str | Path):
     """Loads a saved SB3 model from ``path`` or ``kind:path`` (kind in SB3_CLASSES).
 
@@ -51,12 +59,11 @@ def load_sb3_model(spec: str | Path):
     Raises:
         ValueError: no such file, or no SB3 class could load it.
     """
-    spec = str(spec)
-    kind, _, rest = spec.partition(":")
-    if rest and kind in SB3_CLASSES:
-        path, kinds = Path(rest), [kind]
+    path = policy_file(spec)
+    kind = str(spec).partition(":")[0]
+    if path != Path(spec):
+        kinds = [kind]
     else:
-        path = Path(spec)
         detected = _sb3_kind_from_zip(path) if path.exists() else None
         kinds = [detected] if detected else list(SB3_CLASSES)
     if not path.exists():
@@ -89,10 +96,8 @@ def _optimizers(model) -> list:
 
 #: The parts of the residual each composer mode corrects.
 _MODE_PARTS = {
-    "full": {"translation", "orientation"},
-    "translation": {"translation"},
-    "orientation": {"orientation"},
-    "off": set(),
+    mode: {part for part in ("translation", "orientation") if mode in (part, "full")}
+    for mode in RESIDUAL_MODES
 }
 
 
