@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -118,7 +119,6 @@ def _cmd_demo_teleop(args: argparse.Namespace) -> int:
 def _cmd_view(args: argparse.Namespace) -> int:
     """One episode in Meshcat: live (prints the URL), or saved as a standalone HTML
     replay that any browser opens without a server."""
-    import time
 
     from pydrake.geometry import Meshcat
 
@@ -198,6 +198,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     from rlfd_drake.results import results_dir, write_result
     from rlfd_drake.tasks import load_task
 
+    wall_start = time.perf_counter()
     task = load_task(args.task)
     dmp_model = load_task_dmp(task)
     print(f"[1/4] fitted the DMP on {task.demo_path().name} ({task.name})")
@@ -249,7 +250,11 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
             label: {k: r[k] for k in ("success_rate", "success_std", "episodes")}
             for label, r in rows.items()
         }
-        | {"replay_html": html.name, "replay_success": replay.success},
+        | {
+            "replay_html": html.name,
+            "replay_success": replay.success,
+            "wall_time_s": time.perf_counter() - wall_start,
+        },
         seed=args.seed,
     )
     print(f"      replay ({'success' if replay.success else 'failure'}) saved to {html}")
