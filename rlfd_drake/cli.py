@@ -319,6 +319,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         composition=args.composition,
         init_from=args.init_from,
         force_limit_n=args.force_limit_n,
+        scaled_observation=args.scaled_observation,
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -515,6 +516,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="end training episodes whose low-passed contact force exceeds this, N (a "
         "collision reflex; default: the task's own limit)",
+    )
+    train.add_argument(
+        "--scaled-observation",
+        action="store_true",
+        help="a fixed input layer brings the contact features (lateral position, wrist "
+        "wrench) to order one (observation_scaling.CONTACT_SCALES)",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

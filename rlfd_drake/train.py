@@ -37,6 +37,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFram
 
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import ENV_IDS, RlfdEnv
+from rlfd_drake.observation_scaling import ScaledObservation
 from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import invoked_command
 from rlfd_drake.tasks import load_task
@@ -80,6 +81,8 @@ class TrainConfig:
             baselines; see ``diagram.COMPOSITIONS``).
         init_from: a saved policy (.zip) of the same algorithm whose networks start
             this run (transfer, Table VI); None = a new zero-output policy.
+        scaled_observation: start the networks with a fixed input layer that brings
+            the contact features to order one (``observation_scaling.CONTACT_SCALES``).
         force_limit_n: a contact-force limit for the training episodes only, N
             (checked on the 20 ms low-passed force, like the task's own): an episode
             that exceeds it ends as a failure, as a Panda's collision reflex would stop
@@ -110,6 +113,7 @@ class TrainConfig:
     composition: str = "residual"
     init_from: str | None = None
     force_limit_n: float | None = None
+    scaled_observation: bool = False
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -211,6 +215,7 @@ def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
 
 def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
     """A new SB3 model with the paper's architecture where it states one."""
+    inputs = dict(features_extractor_class=ScaledObservation) if config.scaled_observation else {}
     common = dict(
         env=venv,
         seed=config.seed,
@@ -226,7 +231,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             batch_size=min(64, config.ppo_n_steps * config.envs),
             n_epochs=10,
             gamma=0.99,
-            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init),
+            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **inputs),
             **common,
         )
     elif config.algo == "sac":
@@ -248,7 +253,9 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             target_entropy="auto"
             if config.sac_target_entropy is None
             else float(config.sac_target_entropy),
-            policy_kwargs=dict(net_arch=dict(pi=[400, 300], qf=[300]), activation_fn=torch.nn.ReLU),
+            policy_kwargs=dict(
+                net_arch=dict(pi=[400, 300], qf=[300]), activation_fn=torch.nn.ReLU, **inputs
+            ),
             **common,
         )
     else:
@@ -259,7 +266,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             gamma=0.99,
-            policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init),
+            policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
             **common,
         )
     zero_residual_output(model, config.log_std_init)

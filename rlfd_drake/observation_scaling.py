@@ -1,0 +1,66 @@
+"""A fixed input layer that rescales the observation for the networks.
+
+The Observer's units (see ``systems/observer.py``) suit the whole approach: 2 cm of
+position and 5 N m of wrist torque per unit. In contact, the features that tell a
+residual which way the hole lies are small in those units: the lateral position error
+(a 3 mm fixture error is 0.15) and the wrist torque of a part resting on the entrance
+(about 1 N m, i.e. 0.2), against a vertical force of -1.6 and a height of 2-3. A
+network's first layer starts with weights of the same size for all of them, so these
+features start with a tenth of the influence. ``CONTACT_SCALES`` multiplies them to
+order one, inside the network, so the env's observation (and every policy trained on
+it before) stays as it was.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+from rlfd_drake.systems.observer import OBSERVATION_SIZE
+
+#: Multipliers of the 26 observation entries (layout: ``systems/observer.py``), giving
+#: per unit: 4 mm of lateral position, 2 cm of height, 0.2 rad of orientation error,
+#: 1 N m of wrist torque, 20 N of wrist force; velocities, phase, time and the last
+#: residual keep their units.
+CONTACT_SCALES: tuple[float, ...] = (
+    (5.0, 5.0, 1.0)  # position error x, y, z
+    + (5.0, 5.0, 5.0)  # orientation error
+    + (1.0, 1.0, 1.0)  # angular velocity
+    + (1.0, 1.0, 1.0)  # linear velocity
+    + (5.0, 5.0, 5.0)  # wrist torque
+    + (2.5, 2.5, 2.5)  # wrist force
+    + (1.0, 1.0)  # phase, time
+    + (1.0,) * 6  # last residual
+)
+
+
+class ScaledObservation(BaseFeaturesExtractor):
+    """Multiplies each observation entry by a fixed scale (no trainable parameters).
+
+    Works on a frame-stacked observation (``VecFrameStack``: newest last) by repeating
+    the per-step scales over the stack.
+
+    Raises:
+        ValueError: the space is not a flat Box whose size is a multiple of the scales',
+            or a scale is not a positive finite number.
+    """
+
+    def __init__(self, observation_space: gym.spaces.Box, scales=CONTACT_SCALES):
+        if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
+            raise ValueError(f"observation_space must be a flat Box, got {observation_space}")
+        size = int(observation_space.shape[0])
+        per_step = np.asarray(scales, dtype=np.float32).reshape(-1)
+        if per_step.size != OBSERVATION_SIZE or size % per_step.size:
+            raise ValueError(
+                f"scales must have {OBSERVATION_SIZE} entries dividing the observation "
+                f"size {size}, got {per_step.size}"
+            )
+        if not (np.all(np.isfinite(per_step)) and np.all(per_step > 0)):
+            raise ValueError(f"scales must be positive finite numbers, got {per_step.tolist()}")
+        super().__init__(observation_space, features_dim=size)
+        self.register_buffer("scales", torch.as_tensor(np.tile(per_step, size // per_step.size)))
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        return observations.flatten(start_dim=1) * self.scales

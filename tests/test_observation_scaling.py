@@ -1,0 +1,81 @@
+"""The fixed input layer that rescales the contact features for the networks."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
+
+from rlfd_drake.diagram import RlfdDiagramConfig
+from rlfd_drake.env import RlfdEnv
+from rlfd_drake.observation_scaling import CONTACT_SCALES, ScaledObservation
+from rlfd_drake.policies import DeployedPolicy, load_sb3_model
+from rlfd_drake.systems.observer import OBSERVATION_SIZE
+from rlfd_drake.train import TrainConfig, make_model
+
+
+def _box(size: int) -> gym.spaces.Box:
+    return gym.spaces.Box(-np.inf, np.inf, (size,), np.float32)
+
+
+def test_each_stacked_frame_is_scaled_by_the_same_per_entry_scales():
+    layer = ScaledObservation(_box(3 * OBSERVATION_SIZE))
+    obs = torch.arange(3 * OBSERVATION_SIZE, dtype=torch.float32).reshape(1, -1) + 1.0
+    out = layer(obs).reshape(3, OBSERVATION_SIZE)
+    expected = obs.reshape(3, OBSERVATION_SIZE) * torch.tensor(CONTACT_SCALES)
+    torch.testing.assert_close(out, expected)
+    assert layer.features_dim == 3 * OBSERVATION_SIZE
+    assert not list(layer.parameters())  # nothing to train
+
+
+def test_the_contact_features_reach_order_one():
+    scales = np.asarray(CONTACT_SCALES)
+    # A part resting on the entrance 3 mm off, pressed with 80 N and a 1 N m torque,
+    # in the Observer's units (2 cm, 5 N m and 50 N per unit).
+    assert scales[0] * 0.003 / 0.02 == pytest.approx(0.75)
+    assert scales[13] * 1.0 / 5.0 == pytest.approx(1.0)
+    assert scales[17] * 80.0 / 50.0 == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize(
+    "space, scales, match",
+    [
+        (_box(30), CONTACT_SCALES, "dividing the observation size 30"),
+        (_box(26), (1.0,) * 25, "must have 26 entries"),
+        (_box(26), (0.0,) + (1.0,) * 25, "positive finite"),
+        (gym.spaces.Box(-1, 1, (2, 13), np.float32), CONTACT_SCALES, "flat Box"),
+    ],
+)
+def test_bad_spaces_and_scales_are_named(space, scales, match):
+    with pytest.raises(ValueError, match=match):
+        ScaledObservation(space, scales)
+
+
+def test_scaled_sac_trains_saves_and_deploys_with_the_same_actions(tmp_path):
+    fast = RlfdDiagramConfig(residual_activation_s=0.3)
+    config = TrainConfig(
+        algo="sac", envs=1, history=2, sac_learning_starts=4, scaled_observation=True
+    )
+    venv = VecFrameStack(DummyVecEnv([lambda: RlfdEnv("peg_easy", diagram_config=fast)]), n_stack=2)
+    model = make_model(config, venv, None)
+    assert isinstance(model.policy.actor.features_extractor, ScaledObservation)
+    assert isinstance(model.policy.critic.features_extractor, ScaledObservation)
+    model.learn(total_timesteps=8)
+    model.save(tmp_path / "scaled.zip")
+    loaded, _ = load_sb3_model(f"sac:{tmp_path / 'scaled.zip'}")
+    assert isinstance(loaded.policy.actor.features_extractor, ScaledObservation)
+    obs = np.random.default_rng(1).normal(size=(4, 2 * OBSERVATION_SIZE)).astype(np.float32)
+    np.testing.assert_array_equal(
+        model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0]
+    )
+    deployed = DeployedPolicy(loaded)
+    assert deployed.history == 2 and np.all(np.isfinite(deployed(obs[0, -OBSERVATION_SIZE:])))
+
+
+def test_unscaled_training_keeps_the_plain_input():
+    fast = RlfdDiagramConfig(residual_activation_s=0.3)
+    venv = DummyVecEnv([lambda: RlfdEnv("peg_easy", diagram_config=fast)])
+    model = make_model(TrainConfig(algo="ppo", envs=1), venv, None)
+    assert not isinstance(model.policy.features_extractor, ScaledObservation)
