@@ -316,6 +316,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         log_std_init=args.log_std_init,
         learning_rate=args.learning_rate,
         sac_learning_starts=args.sac_learning_starts,
+        sac_gradient_steps=args.sac_gradient_steps,
         composition=args.composition,
         init_from=args.init_from,
         force_limit_n=args.force_limit_n,
@@ -494,6 +495,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="SAC: steps explored with the initial policy before the first update",
+    )
+    train.add_argument(
+        "--sac-gradient-steps",
+        type=int,
+        default=1,
+        help="SAC: updates after each step of the --envs envs (1 with 2 envs = half an "
+        "update per transition)",
     )
     train.add_argument(
         "--log-std-init",

@@ -71,6 +71,8 @@ class TrainConfig:
         ppo_n_steps: PPO rollout length per env between updates.
         sac_learning_starts: SAC steps before its first update, explored with the
             initial (zero-mean) policy (see ResidualSAC).
+        sac_gradient_steps: SAC updates after each step of the ``envs`` envs (1 with
+            two envs: half an update per transition).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
             coefficient.
         sac_target_entropy: the entropy SAC's coefficient tuning holds the policy at;
@@ -108,6 +110,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     ppo_n_steps: int = 256
     sac_learning_starts: int = 0
+    sac_gradient_steps: int = 1
     sac_initial_ent_coef: float = 0.01
     sac_target_entropy: float | None = None
     composition: str = "residual"
@@ -127,6 +130,7 @@ class TrainConfig:
             "eval_episodes",
             "checkpoint_every_episodes",
             "ppo_n_steps",
+            "sac_gradient_steps",
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -243,7 +247,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             batch_size=128,
             learning_starts=config.sac_learning_starts,
             train_freq=(1, "step"),
-            gradient_steps=1,
+            gradient_steps=config.sac_gradient_steps,
             gamma=0.99,
             # SB3's default starts the entropy coefficient at 1.0, which against a
             # sparse reward of 1 per episode made the entropy bonus dominate: the

@@ -126,6 +126,14 @@ def test_sac_target_entropy_reaches_the_model():
     assert wide.target_entropy == 1.0
 
 
+def test_sac_gradient_steps_set_the_updates_per_step():
+    config = TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=4, sac_gradient_steps=3)
+    model = make_model(config, fast_venv(), None)
+    assert model.gradient_steps == 3
+    model.learn(total_timesteps=6)
+    assert model._n_updates == 3 * 2  # steps 5 and 6, three updates each
+
+
 def test_bad_config_names_the_field():
     with pytest.raises(ValueError, match="sac_target_entropy"):
         TrainConfig(sac_target_entropy=float("nan"))
@@ -137,6 +145,8 @@ def test_bad_config_names_the_field():
         TrainConfig(task="peg_huge")
     with pytest.raises(ValueError, match="force_limit_n must be a positive number, got 0"):
         TrainConfig(force_limit_n=0.0)
+    with pytest.raises(ValueError, match="sac_gradient_steps must be >= 1, got 0"):
+        TrainConfig(sac_gradient_steps=0)
 
 
 def test_training_force_limit_ends_episodes_that_push_harder():
