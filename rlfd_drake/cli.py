@@ -139,12 +139,13 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
         raise ValueError(f"--realtime-rate must be >= 0, got {args.realtime_rate}")
     task = load_task(args.task)
+    from rlfd_drake.evaluate import NAMED_POLICIES
     from rlfd_drake.policies import policy_file
 
-    if args.policy not in ("dmp", "random") and not policy_file(args.policy).is_file():
+    if args.policy not in NAMED_POLICIES and not policy_file(args.policy).is_file():
         raise ValueError(
-            f"--policy must be dmp, random or a saved policy .zip, got {args.policy!r} "
-            "(no such file)"
+            f"--policy must be one of {NAMED_POLICIES} or a saved policy .zip, got "
+            f"{args.policy!r} (no such file)"
         )
     # The parts of the residual the policy was trained to set (see rlfd evaluate).
     residual_mode = _trained_mode(args.policy)
@@ -576,7 +577,9 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
     evaluate.add_argument("--task", default="peg_easy")
     evaluate.add_argument(
-        "--policy", default="dmp", help="dmp | random | PATH to a policy zip or baseline.npz"
+        "--policy",
+        default="dmp",
+        help="dmp | random | force_search | PATH to a policy zip or baseline.npz",
     )
     evaluate.add_argument("--episodes", type=int, default=None, help="default: the task's grid")
     evaluate.add_argument("--seed", type=int, default=0)
@@ -609,7 +612,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
     view.add_argument("--task", default="peg_easy")
-    view.add_argument("--policy", default="dmp", help="dmp | random | PATH to a policy zip")
+    view.add_argument(
+        "--policy", default="dmp", help="dmp | random | force_search | PATH to a policy zip"
+    )
     view.add_argument("--seed", type=int, default=0, help="seed of the start and fixture error")
     view.add_argument("--html", help="save a standalone HTML replay here instead of live")
     view.add_argument("--overwrite", action="store_true", help="replace an existing --html")

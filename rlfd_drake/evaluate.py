@@ -7,6 +7,8 @@ Policies are named by a string, so that worker processes can build their own:
 * ``"dmp"``: the DMP alone (zero residual).
 * ``"random"``: the Random baseline (uniform corrections in [-1, 1]; which parts are
   randomised follows ``residual_mode``), reseeded per episode from (seed, episode).
+* ``"force_search"``: a hand-written force-guided search (not a paper baseline: a
+  reference for what the observation allows; see ``baselines/force_guided.py``).
 * a path to a Stable-Baselines3 model ``.zip`` (PPO, SAC, TD3 or sb3-contrib
   RecurrentPPO, told apart by the zip's metadata; ``"ppo:path"``, ``"sac:path"``,
   ``"td3:path"``, ``"recurrent_ppo:path"`` force the class), run deterministically.
@@ -79,6 +81,8 @@ RESULT_KEYS = (
 )
 
 _MODEL_CACHE: dict[str, tuple[object, str]] = {}
+#: Policies named by a word rather than a file.
+NAMED_POLICIES = ("dmp", "random", "force_search")
 
 
 def make_policy(
@@ -120,6 +124,10 @@ def make_policy(
                 "of a translation|orientation policy"
             )
         return kit.policy
+    if policy_spec == "force_search":
+        from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+
+        return ForceGuidedSearch()
     if policy_spec == "random":
         from rlfd_drake.baselines.random_policy import RandomResidualPolicy
 
@@ -169,7 +177,7 @@ def _init_worker(
         from rlfd_drake.baselines.episodic import load_baseline
 
         _WORKER["kit"] = load_baseline(policy_spec, task, _WORKER["dmp"])
-    elif policy_spec not in ("dmp", "random"):
+    elif policy_spec not in NAMED_POLICIES:
         # Load the models once, fail early.
         make_policy(policy_spec, residual_mode, task=task, dmp=_WORKER["dmp"])
 
@@ -336,7 +344,7 @@ def evaluate(
 
     Args:
         task_name: a shipped task name or a task YAML path.
-        policy_spec: "dmp", "random" or a saved SB3 model (see module docstring).
+        policy_spec: one of ``NAMED_POLICIES`` or a saved policy (see module docstring).
         episodes: number of episodes (the paper: 500 for the pegs, 160 for gear/RJ-45).
         seed: seed of the starts, fixture errors and random policies.
         workers: processes (spawn); 1 runs in this process.

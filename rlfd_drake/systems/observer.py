@@ -15,6 +15,9 @@ from pydrake.systems.framework import BasicVector, Context, DiscreteValues, Leaf
 
 #: Size of the observation vector (see :class:`Observer`).
 OBSERVATION_SIZE = 26
+#: Where the wrist wrench sits in the observation (see :class:`Observer`).
+OBSERVATION_WRIST_TORQUE = slice(12, 15)
+OBSERVATION_WRIST_FORCE = slice(15, 18)
 # Force-metric state layout.
 _PEAK_F, _SUM_F, _COUNT, _PEAK_TAU, _SUCCESS, _FILTERED_F, _PEAK_FILTERED_F = range(7)
 
