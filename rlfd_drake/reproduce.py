@@ -56,7 +56,8 @@ class Row:
 
     Attributes:
         label: the row's name (the paper's, plus what differs here).
-        source: "dmp", "random", "policy:<file under models/>" (a shipped policy),
+        source: a named policy (``evaluate.NAMED_POLICIES``: "dmp", "random",
+            "force_search"), "policy:<file under models/>" (a shipped policy),
             "run:<key of RUNS>" (the policy of the column's task trained by ``rlfd
             train``; not run, with the command to train it, if the folder has no
             policy yet),
@@ -262,6 +263,7 @@ TABLES: dict[str, Table] = {
         _SIM,
         [
             Row("Random", "random", {"easy": 25.8, "hard": 9.0}),
+            Row("Force-guided search (hand-written reference)", "force_search", {}),
             Row(
                 "Linear (RLS)",
                 "baseline:linear",
@@ -281,6 +283,9 @@ TABLES: dict[str, Table] = {
                 stochastic=True,
             ),
         ],
+        "The force-guided search is not in the paper: a hand-written rule (lift, push "
+        "away from the centre of pressure the wrist torque gives) that shows what the "
+        "residual's observation allows.",
     ),
     "4": Table(
         "Table IV: full pose (translation policy / orientation policy)",
@@ -484,15 +489,14 @@ def _evaluation(
 def _cell(
     row: Row, task: str, budget: str, seed: int, workers: int, metric: str = "success"
 ) -> dict:
+    from rlfd_drake.evaluate import NAMED_POLICIES
+
     train_episodes, eval_episodes = BUDGETS[budget]
     kind, _, detail = row.source.partition(":")
     if kind == "none":
         return {"status": "not run", "reason": detail}
-    if kind == "dmp":
-        policy, label, trained = "dmp", "dmp", None
-        missing = None  # nothing to look for on disk
-    elif kind == "random":
-        policy, label, trained = "random", "random", None
+    if kind in NAMED_POLICIES:
+        policy, label, trained = kind, kind, None
         missing = None  # nothing to look for on disk
     elif kind == "policy":
         policy = str(models_dir() / detail)

@@ -260,3 +260,22 @@ def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp
     sampled = rows["SAC / SAC (rLfD), sampled actions"]["gear"]
     assert sampled["status"] == "not run" and "rlfd train --task gear" in sampled["reason"]
     assert not [policy for policy in evaluated if "sac_te1" in policy]
+
+
+def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    asked = []
+
+    def recording_evaluation(task, policy, name, *args, **kwargs):
+        asked.append((task, policy))
+        return _fake_evaluation(task, policy, name, *args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "_evaluation", recording_evaluation)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
+    assert ("peg_easy", "force_search") in asked and ("peg_hard", "force_search") in asked
+    row = next(r for r in data["rows"] if r["label"].startswith("Force-guided search"))
+    assert row["ours"]["hard"]["success_pct"] == pytest.approx(70.0)
+    assert "not in the paper" in (tmp_path / "results" / "table_2.md").read_text()
