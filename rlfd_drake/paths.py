@@ -7,7 +7,7 @@ from pathlib import Path
 
 #: The shipped rLfD residual (SAC, peg_easy) that `make demo` and `rlfd reproduce` use,
 #: and the earlier PPO one; their commands are in models/policies/README.md.
-SHIPPED_POLICY = "policies/peg_easy_sac_translation.zip"
+SHIPPED_POLICY = "policies/peg_easy_sac_translation_gs4.zip"
 SHIPPED_FULL_POSE_POLICY = "policies/peg_easy_sac.zip"
 SHIPPED_PPO_POLICY = "policies/peg_easy_ppo.zip"
 
