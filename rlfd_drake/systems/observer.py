@@ -126,16 +126,12 @@ class Observer(LeafSystem):
         self._joint = int(wrist_joint_index)
         self._joint_child_body = int(joint.child_body().index())
         self._X_CJc = joint.frame_on_child().GetFixedPoseInBodyFrame()
-        self._obs_scale = np.concatenate(
-            [
-                np.full(3, 1.0 / config.position_scale_m),
-                np.ones(3),
-                np.full(3, 1.0 / config.angular_velocity_scale_rad_per_s),
-                np.full(3, 1.0 / config.linear_velocity_scale_m_per_s),
-                np.full(3, 1.0 / config.torque_scale_Nm),
-                np.full(3, 1.0 / config.force_scale_N),
-            ]
-        )
+        self._obs_scale = np.ones(18)
+        self._obs_scale[0:3] = 1.0 / config.position_scale_m
+        self._obs_scale[6:9] = 1.0 / config.angular_velocity_scale_rad_per_s
+        self._obs_scale[9:12] = 1.0 / config.linear_velocity_scale_m_per_s
+        self._obs_scale[OBSERVATION_WRIST_TORQUE] = 1.0 / config.torque_scale_Nm
+        self._obs_scale[OBSERVATION_WRIST_FORCE] = 1.0 / config.force_scale_N
         n_arm = plant.num_velocities(arm_instance)
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", Value([RigidTransform()] * plant.num_bodies())
@@ -224,7 +220,9 @@ class Observer(LeafSystem):
         raw[0:3] = X_WP.translation() - self._p_goal_nominal
         raw[3:6] = aa.angle() * aa.axis()
         raw[6:12] = V_WP.get_coeffs()
-        raw[12:18] = F_CJc_Jc.Rotate(R_WJc).get_coeffs()
+        F_CJc_W = F_CJc_Jc.Rotate(R_WJc)
+        raw[OBSERVATION_WRIST_TORQUE] = F_CJc_W.rotational()
+        raw[OBSERVATION_WRIST_FORCE] = F_CJc_W.translational()
         obs[:18] = raw * self._obs_scale
         obs[18] = self._phase.Eval(context)[0]
         obs[19] = context.get_time() / self.config.episode_time_s
