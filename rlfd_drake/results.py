@@ -40,6 +40,11 @@ def _to_jsonable(value: Any) -> Any:
     return value
 
 
+def utc_now() -> str:
+    """The current UTC time, ISO 8601 to the second (the date of a measurement)."""
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
 def write_result(
     name: str, data: dict, seed: int | None = None, command: str | None = None
 ) -> Path:
@@ -53,7 +58,7 @@ def write_result(
     record = {
         "command": command if command is not None else invoked_command(),
         "seed": seed,
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": utc_now(),
         "machine": {
             "python": platform.python_version(),
             "processor": platform.machine(),

@@ -39,7 +39,7 @@ from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import ENV_IDS, RlfdEnv
 from rlfd_drake.observation_scaling import ScaledObservation
 from rlfd_drake.policies import load_sb3_model
-from rlfd_drake.results import invoked_command
+from rlfd_drake.results import invoked_command, utc_now
 from rlfd_drake.tasks import load_task
 
 ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
@@ -462,6 +462,7 @@ def train(
         "wall_time_s": wall,
         "success_rate_last_50": float(np.mean(log.successes[-50:])) if log.successes else 0.0,
         "success_rate_all": float(np.mean(log.successes)) if log.successes else 0.0,
+        "date": utc_now(),  # when training finished
     }
     (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     return metrics

@@ -74,6 +74,7 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
     run = tmp_path / "run"
     metrics = train(config, run, progress_bar=False)
     assert metrics["episodes"] == 1
+    assert metrics["date"].startswith("20")
     for name in ("config.json", "episodes.csv", "policy.zip", "metrics.json"):
         assert (run / name).exists(), name
     assert json.loads((run / "config.json").read_text())["config"]["algo"] == "ppo"
