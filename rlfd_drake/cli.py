@@ -313,6 +313,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         reward=args.reward,
         curriculum=args.curriculum,
         eval_every_episodes=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        checkpoint_every_episodes=args.checkpoint_every,
         sac_target_entropy=args.sac_target_entropy,
         log_std_init=args.log_std_init,
         learning_rate=args.learning_rate,
@@ -483,7 +485,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument("--reward", choices=["sparse", "dense"], default="sparse")
     train.add_argument("--curriculum", action="store_true", help="grow the start perturbation")
-    train.add_argument("--eval-every", type=int, default=0, help="evaluate every N episodes")
+    train.add_argument(
+        "--eval-every",
+        type=int,
+        default=0,
+        help="evaluate the mean action every N finished episodes (0 = off); the best "
+        "policy is kept as eval/best_model.zip",
+    )
+    train.add_argument("--eval-episodes", type=int, default=10, help="episodes per evaluation")
+    train.add_argument(
+        "--checkpoint-every", type=int, default=100, help="checkpoint every N finished episodes"
+    )
     train.add_argument(
         "--sac-target-entropy",
         type=float,

@@ -31,6 +31,7 @@ from stable_baselines3.common.callbacks import (
     CallbackList,
     CheckpointCallback,
     EvalCallback,
+    EventCallback,
 )
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
@@ -61,9 +62,10 @@ class TrainConfig:
             first half of training (PPO's physical-robot recipe in the paper).
         curriculum_start: initial perturbation scale.
         history: observations stacked for SAC (the paper's SAC needs memory).
-        eval_every_episodes: periodic evaluation interval (0 = off).
-        eval_episodes: episodes per periodic evaluation.
-        checkpoint_every_episodes: checkpoint interval.
+        eval_every_episodes: periodic evaluation interval in finished episodes (0 = off);
+            the best evaluated policy is kept as ``eval/best_model.zip``.
+        eval_episodes: episodes per periodic evaluation (mean action).
+        checkpoint_every_episodes: checkpoint interval in finished episodes.
         log_std_init: initial log std of the policy's Gaussian (exploration size; for
             SAC before its tanh squashing): small, so early exploration is a gentle
             jiggle around the DMP rather than uniform noise over the residual's range.
@@ -372,6 +374,28 @@ class EpisodeLog(BaseCallback):
         self._file.close()
 
 
+class EveryNEpisodes(EventCallback):
+    """Triggers ``callback`` each time the count of finished training episodes (over all
+    envs) reaches a multiple of ``n_episodes``. SB3's own triggers count steps, and an
+    episode here lasts 1-50 steps (successes end early), so a step interval drifts from
+    the episode interval a user asked for."""
+
+    def __init__(self, n_episodes: int, callback: BaseCallback, episodes_done: int = 0):
+        if n_episodes < 1:
+            raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+        super().__init__(callback)
+        self.n_episodes = n_episodes
+        self.episodes = episodes_done
+        self._next_trigger = (episodes_done // n_episodes + 1) * n_episodes
+
+    def _on_step(self) -> bool:
+        self.episodes += int(np.sum(self.locals["dones"]))
+        if self.episodes < self._next_trigger:
+            return True
+        self._next_trigger = (self.episodes // self.n_episodes + 1) * self.n_episodes
+        return self._on_event()
+
+
 def _newest_checkpoint(run_dir: Path) -> Path | None:
     checkpoints = sorted(
         (run_dir / "checkpoints").glob("*_steps.zip"),
@@ -423,30 +447,38 @@ def train(
         if config.init_from is not None:
             copy_policy_parameters(load_model(config.init_from), model)
 
-    steps_per_episode = 50
+    # Checkpoints and evaluations fire on finished episodes (their children then act
+    # on every trigger).
     callbacks: list[BaseCallback] = [
         EpisodeLog(config, episodes_csv, episodes_done),
-        CheckpointCallback(
-            save_freq=max(1, config.checkpoint_every_episodes * steps_per_episode // config.envs),
-            save_path=str(run_dir / "checkpoints"),
-            name_prefix="policy",
+        EveryNEpisodes(
+            config.checkpoint_every_episodes,
+            CheckpointCallback(
+                save_freq=1, save_path=str(run_dir / "checkpoints"), name_prefix="policy"
+            ),
+            episodes_done,
         ),
     ]
     if config.eval_every_episodes > 0:
         eval_env = make_envs(config, 1, config.seed + 10_000)
         callbacks.append(
-            EvalCallback(
-                eval_env,
-                n_eval_episodes=config.eval_episodes,
-                eval_freq=max(1, config.eval_every_episodes * steps_per_episode // config.envs),
-                log_path=str(run_dir / "eval"),
-                best_model_save_path=str(run_dir / "eval"),
-                deterministic=True,
+            EveryNEpisodes(
+                config.eval_every_episodes,
+                EvalCallback(
+                    eval_env,
+                    n_eval_episodes=config.eval_episodes,
+                    eval_freq=1,
+                    log_path=str(run_dir / "eval"),
+                    best_model_save_path=str(run_dir / "eval"),
+                    deterministic=True,
+                ),
+                episodes_done,
             )
         )
     start = time.perf_counter()
     model.learn(
-        total_timesteps=config.episodes * steps_per_episode * 2,  # the callback stops it
+        # An upper bound (an episode has at most 61 residual steps); EpisodeLog stops it.
+        total_timesteps=config.episodes * 100,
         callback=CallbackList(callbacks),
         progress_bar=progress_bar,
         reset_num_timesteps=checkpoint is None,

@@ -7,11 +7,12 @@ import json
 import numpy as np
 import pytest
 import torch
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.env import RlfdEnv
-from rlfd_drake.train import TrainConfig, load_model, make_model, train
+from rlfd_drake.train import EveryNEpisodes, TrainConfig, load_model, make_model, train
 
 FAST = RlfdDiagramConfig(residual_activation_s=0.3)
 
@@ -70,16 +71,58 @@ def test_save_load_round_trip_gives_identical_actions(tmp_path):
 
 
 def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
-    config = TrainConfig(algo="ppo", episodes=1, envs=1, ppo_n_steps=16)
+    config = TrainConfig(
+        algo="ppo",
+        episodes=1,
+        envs=1,
+        ppo_n_steps=16,
+        checkpoint_every_episodes=1,
+        eval_every_episodes=1,
+        eval_episodes=1,
+    )
     run = tmp_path / "run"
     metrics = train(config, run, progress_bar=False)
     assert metrics["episodes"] == 1
     assert metrics["date"].startswith("20")
+    assert len(list((run / "checkpoints").glob("policy_*_steps.zip"))) == 1
+    evaluations = np.load(run / "eval" / "evaluations.npz")
+    assert evaluations["results"].shape == (1, 1)  # one evaluation of one episode
     for name in ("config.json", "episodes.csv", "policy.zip", "metrics.json"):
         assert (run / name).exists(), name
     assert json.loads((run / "config.json").read_text())["config"]["algo"] == "ppo"
     with pytest.raises(FileExistsError, match="already holds a run"):
         train(config, run, progress_bar=False)
+
+
+class _CountCalls(BaseCallback):
+    def _on_step(self) -> bool:
+        return True
+
+
+def _triggers(n_episodes, dones_per_step, episodes_done=0):
+    """Steps at which EveryNEpisodes fires, for the given per-step ``dones``."""
+    child = _CountCalls()
+    trigger = EveryNEpisodes(n_episodes, child, episodes_done)
+    trigger.init_callback(make_model(TrainConfig(algo="ppo", envs=1), fast_venv(), None))
+    fired = []
+    for step, dones in enumerate(dones_per_step):
+        calls = child.n_calls
+        trigger.update_locals({"dones": np.array(dones, dtype=bool)})
+        assert trigger.on_step()
+        if child.n_calls > calls:
+            fired.append(step)
+    return fired
+
+
+def test_checkpoints_and_evaluations_fire_on_finished_episodes_not_steps():
+    # Two envs; finished episodes after each step: 1, 2, 4, 4, 5, 7, 7, 9.
+    dones = [[1, 0], [0, 1], [1, 1], [0, 0], [1, 0], [1, 1], [0, 0], [1, 1]]
+    assert _triggers(3, dones) == [2, 5, 7]  # on reaching 3, 6 and 9 episodes
+    assert _triggers(1, dones) == [0, 1, 2, 4, 5, 7]
+    # A resumed run with 5 episodes done counts on from 5: 6, 7, 9, 9, 10, 12, 12, 14.
+    assert _triggers(3, dones, episodes_done=5) == [0, 2, 5]
+    with pytest.raises(ValueError, match="n_episodes"):
+        EveryNEpisodes(0, _CountCalls())
 
 
 def test_exported_policy_acts_the_same_and_is_smaller(tmp_path):
