@@ -139,7 +139,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
         raise ValueError(f"--realtime-rate must be >= 0, got {args.realtime_rate}")
     task = load_task(args.task)
-    from rlfd_drake.evaluate import NAMED_POLICIES
+    from rlfd_drake.evaluate import NAMED_POLICIES, trained_mode
     from rlfd_drake.policies import policy_file
 
     if args.policy not in NAMED_POLICIES and not policy_file(args.policy).is_file():
@@ -148,7 +148,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
             f"{args.policy!r} (no such file)"
         )
     # The parts of the residual the policy was trained to set (see rlfd evaluate).
-    residual_mode = _trained_mode(args.policy)
+    residual_mode = trained_mode(args.policy)
     policy = make_policy(args.policy, residual_mode, episode_seed=args.seed)
     dmp_model = load_task_dmp(task)
     spec = make_episode_specs(task, 1, args.seed, grid=False)[0]
@@ -194,7 +194,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
 
     from rlfd_drake.diagram import RlfdDiagramConfig
     from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
-    from rlfd_drake.evaluate import evaluate, make_policy, write_evaluation
+    from rlfd_drake.evaluate import evaluate, make_policy, trained_mode, write_evaluation
     from rlfd_drake.paths import models_dir
     from rlfd_drake.results import results_dir, write_result
     from rlfd_drake.tasks import load_task
@@ -205,7 +205,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     print(f"[1/4] fitted the DMP on {task.demo_path().name} ({task.name})")
     policy_path = models_dir() / SHIPPED_POLICY
     policies = ["dmp"] + ([str(policy_path)] if policy_path.exists() else [])
-    residual_mode = _trained_mode(str(policy_path))
+    residual_mode = trained_mode(str(policy_path))
     if len(policies) == 1:
         print(f"      no trained residual at {policy_path}: running the DMP alone")
     rows = {}
@@ -365,37 +365,52 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def _policy_stem(spec: str) -> str:
-    """A file-name stem for a policy spec: the run folder of a file ``rlfd train`` or a
-    baseline always names the same (policy.zip, baseline.npz), else the file's stem;
-    "a_and_b" for a translation|orientation split."""
-    if "|" in spec:
-        return "_and_".join(_policy_stem(part) for part in spec.split("|"))
-    from rlfd_drake.policies import policy_file
+def _parse_targets(items: list[str]) -> dict[str, float]:
+    """``task=percent`` items as a dict; ValueError naming the malformed one."""
+    targets = {}
+    for item in items:
+        task, _, value = item.partition("=")
+        try:
+            targets[task] = float(value)
+        except ValueError:
+            raise ValueError(
+                f"--target must be TASK=PERCENT (e.g. peg_easy=95), got {item!r}"
+            ) from None
+    return targets
 
-    path = policy_file(spec)
-    return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
 
+def _cmd_seeds(args: argparse.Namespace) -> int:
+    from rlfd_drake.seed_study import seed_study
 
-def _trained_mode(policy_spec: str) -> str:
-    """The residual mode a saved policy was trained with ("full" if unknown or not a
-    single saved policy)."""
-    from rlfd_drake.policies import policy_file, trained_residual_mode
-
-    if "|" in policy_spec or not policy_spec.endswith(".zip"):
-        return "full"
-    return trained_residual_mode(policy_file(policy_spec)) or "full"
+    data = seed_study(
+        args.runs,
+        args.tasks,
+        episodes=args.episodes,
+        seed=args.seed,
+        workers=args.workers,
+        targets=_parse_targets(args.target),
+        name=args.name,
+    )
+    for column, spread in data["over_seeds"].items():
+        std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
+        print(f"{column}: {spread['mean']:.1f}{std} % over {len(data['per_seed'])} seeds")
+    if data["targets"]:
+        print(
+            f"seeds meeting the targets: {data['seeds_meeting_targets']} of {len(data['per_seed'])}"
+        )
+    print(f"wrote results/seeds_{data['name']}.json and .md")
+    return 0
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from rlfd_drake.evaluate import evaluate, write_evaluation
+    from rlfd_drake.evaluate import evaluate, evaluation_name, trained_mode, write_evaluation
     from rlfd_drake.results import results_dir
 
     if args.residual_mode is None:
-        args.residual_mode = _trained_mode(args.policy)
-    mode = "" if args.residual_mode == "full" else f"_{args.residual_mode}"
-    mode += "_stochastic" if args.stochastic else ""
-    name = args.name or f"eval_{args.task}_{_policy_stem(args.policy)}{mode}_s{args.seed}"
+        args.residual_mode = trained_mode(args.policy)
+    name = args.name or evaluation_name(
+        args.task, args.policy, args.residual_mode, args.stochastic, args.seed
+    )
     existing = results_dir() / f"{name}.json"
     if existing.exists() and not args.overwrite:
         raise FileExistsError(f"{existing} exists; pass --overwrite or --name to keep both")
@@ -585,6 +600,23 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--seed", type=int, default=0)
     reproduce.add_argument("--workers", type=int, default=2)
     reproduce.set_defaults(func=_cmd_reproduce)
+
+    seeds = sub.add_parser(
+        "seeds", help="a training recipe's success over seeds (one run folder per seed)"
+    )
+    seeds.add_argument("--runs", nargs="+", required=True, help="run folders, one per seed")
+    seeds.add_argument("--tasks", nargs="+", default=["peg_easy", "peg_hard"])
+    seeds.add_argument("--episodes", type=int, default=200, help="evaluation starts per task")
+    seeds.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    seeds.add_argument("--workers", type=int, default=2)
+    seeds.add_argument(
+        "--target",
+        nargs="*",
+        default=[],
+        help="TASK=PERCENT the mean action should reach, e.g. peg_easy=95 peg_hard=55",
+    )
+    seeds.add_argument("--name", default=None, help="results/seeds_<name> (default: the runs')")
+    seeds.set_defaults(func=_cmd_seeds)
 
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
     evaluate.add_argument("--task", default="peg_easy")

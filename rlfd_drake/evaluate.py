@@ -45,6 +45,7 @@ from rlfd_drake.policies import (
     check_residual_mode,
     load_sb3_model,
     policy_file,
+    trained_residual_mode,
 )
 from rlfd_drake.results import results_dir, write_result
 from rlfd_drake.tasks import TaskSpec, load_task
@@ -52,7 +53,10 @@ from rlfd_drake.tasks import TaskSpec, load_task
 __all__ = [
     "RESULT_KEYS",
     "evaluate",
+    "evaluation_name",
     "make_policy",
+    "policy_stem",
+    "trained_mode",
     "write_evaluation",
 ]
 
@@ -547,6 +551,34 @@ def write_evaluation(result: dict, name: str, command: str | None = None) -> dic
     md_path.write_text(evaluation_markdown(result))
     png_path = plot_success_vs_perturbation([result], results_dir() / f"{name}.png")
     return {"json": json_path, "md": md_path, "png": png_path}
+
+
+def policy_stem(spec: str) -> str:
+    """A file-name stem for a policy spec: the run folder of a file ``rlfd train`` or a
+    baseline always names the same (policy.zip, baseline.npz), else the file's stem;
+    "a_and_b" for a translation|orientation split."""
+    if "|" in spec:
+        return "_and_".join(policy_stem(part) for part in spec.split("|"))
+    path = policy_file(spec)
+    return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
+
+
+def trained_mode(policy_spec: str) -> str:
+    """The residual mode a saved policy was trained with ("full" if unknown or not a
+    single saved policy)."""
+    if "|" in policy_spec or not policy_spec.endswith(".zip"):
+        return "full"
+    return trained_residual_mode(policy_file(policy_spec)) or "full"
+
+
+def evaluation_name(
+    task: str, policy_spec: str, residual_mode: str, stochastic: bool, seed: int
+) -> str:
+    """The results file stem ``rlfd evaluate`` gives an evaluation, e.g.
+    ``eval_peg_hard_<run folder>_translation_stochastic_s0``."""
+    mode = "" if residual_mode == "full" else f"_{residual_mode}"
+    mode += "_stochastic" if stochastic else ""
+    return f"eval_{task}_{policy_stem(policy_spec)}{mode}_s{seed}"
 
 
 def result_from_json(path: str | Path) -> dict:

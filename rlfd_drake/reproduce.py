@@ -42,7 +42,7 @@ from rlfd_drake.paths import (
 )
 from rlfd_drake.results import results_dir, write_result
 
-__all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table"]
+__all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table", "stored_or_new_evaluation"]
 
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
@@ -444,7 +444,7 @@ def _baseline_run(
     return policy
 
 
-def _evaluation(
+def stored_or_new_evaluation(
     task: str,
     policy: str,
     name: str,
@@ -546,7 +546,7 @@ def _cell(
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
 
     def evaluation(available: bool) -> dict | None:
-        return _evaluation(
+        return stored_or_new_evaluation(
             task,
             policy,
             name,

@@ -46,13 +46,13 @@ def test_demo_record_refuses_to_overwrite(tmp_path, capsys):
 
 
 def test_evaluation_file_names_of_policy_specs():
-    from rlfd_drake.cli import _policy_stem
+    from rlfd_drake.evaluate import policy_stem
 
-    assert _policy_stem("runs/peg_linear_s0/baseline.npz") == "peg_linear_s0"
-    assert _policy_stem("runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
-    assert _policy_stem("sac:runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
-    assert _policy_stem("models/policies/peg_easy_sac.zip") == "peg_easy_sac"
-    assert _policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
+    assert policy_stem("runs/peg_linear_s0/baseline.npz") == "peg_linear_s0"
+    assert policy_stem("runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
+    assert policy_stem("sac:runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
+    assert policy_stem("models/policies/peg_easy_sac.zip") == "peg_easy_sac"
+    assert policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
 
 
 def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, capsys):
@@ -67,24 +67,24 @@ def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, ca
 
 
 def test_saved_policies_run_in_the_residual_mode_they_were_trained_with(tmp_path):
-    from rlfd_drake.cli import _trained_mode
+    from rlfd_drake.evaluate import trained_mode
 
     run = tmp_path / "run"
     run.mkdir()
     (run / "policy.zip").write_bytes(b"")
-    assert _trained_mode(str(run / "policy.zip")) == "full"  # unknown
+    assert trained_mode(str(run / "policy.zip")) == "full"  # unknown
     (run / "config.json").write_text(json.dumps({"config": {"residual_mode": "translation"}}))
-    assert _trained_mode(str(run / "policy.zip")) == "translation"
-    assert _trained_mode(f"sac:{run / 'policy.zip'}") == "translation"
-    assert _trained_mode("dmp") == "full"
+    assert trained_mode(str(run / "policy.zip")) == "translation"
+    assert trained_mode(f"sac:{run / 'policy.zip'}") == "translation"
+    assert trained_mode("dmp") == "full"
 
 
 def test_the_shipped_policy_records_its_translation_only_training():
-    from rlfd_drake.cli import _trained_mode
+    from rlfd_drake.evaluate import trained_mode
     from rlfd_drake.paths import SHIPPED_POLICY, models_dir
     from rlfd_drake.policies import training_config_file
 
     shipped = models_dir() / SHIPPED_POLICY
-    assert _trained_mode(str(shipped)) == "translation"  # what make demo runs it in
+    assert trained_mode(str(shipped)) == "translation"  # what make demo runs it in
     command = json.loads(training_config_file(shipped).read_text())["command"]
     assert "--residual-mode translation" in command and "--task peg_easy" in command

@@ -49,7 +49,7 @@ def test_reproduce_table_writes_paper_and_ours_side_by_side(tmp_path, monkeypatc
         trained.append((method, task, mode, episodes))
         return tmp_path / "runs" / f"{task}_{method}" / "baseline.npz"
 
-    monkeypatch.setattr(reproduce, "_evaluation", _fake_evaluation)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
     monkeypatch.setattr(reproduce, "_baseline_run", fake_run)
     data = reproduce.reproduce_table("1", budget="quick", seed=0, workers=1)
     # Every baseline of Table I is trained on the easy hole only, with the quick budget.
@@ -67,7 +67,7 @@ def test_reproduce_table_writes_paper_and_ours_side_by_side(tmp_path, monkeypatc
 
 def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(reproduce, "_evaluation", _fake_evaluation)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
@@ -94,7 +94,7 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
         names.append(args[2])
         return _fake_evaluation(*args, **kwargs)
 
-    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording)
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
@@ -119,7 +119,7 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
         calls.append(args[2])
         return _fake_evaluation(*args, **kwargs)
 
-    monkeypatch.setattr(reproduce, "_evaluation", counting)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", counting)
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
@@ -152,7 +152,7 @@ def test_linear_random_row_splits_translation_and_orientation(tmp_path, monkeypa
         calls.append(args)
         return _fake_evaluation(*args, **kwargs)
 
-    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording)
     for function in ("_baseline_run", "_baseline_path"):
         monkeypatch.setattr(
             reproduce, function, lambda method, task, *a: Path(f"runs/{task}_{method}/baseline.npz")
@@ -180,7 +180,7 @@ def test_table_3_and_6_evaluate_their_runs_with_their_composition(tmp_path, monk
         calls.append(args)
         return _fake_evaluation(*args, **kwargs)
 
-    monkeypatch.setattr(reproduce, "_evaluation", recording)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording)
     data = reproduce.reproduce_table("3", budget="quick", seed=0, workers=1)
     pure = {c[0]: c for c in calls if "pure" in c[1]}
     assert set(pure) == {"peg_easy", "peg_hard"}  # trained on easy, evaluated on both
@@ -209,13 +209,15 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
     monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
     stored = {"episodes": 40, "seed": 0, "success_rate": 0.0}
     write_result("eval_rj45_random_n40_s0", stored, seed=0)  # before bounds were stored
-    reproduce._evaluation("rj45", "random", "eval_rj45_random_n40_s0", "full", 40, 0, 1)
+    reproduce.stored_or_new_evaluation(
+        "rj45", "random", "eval_rj45_random_n40_s0", "full", 40, 0, 1
+    )
     assert len(fresh) == 1  # RJ-45's bounds are no longer the old 1 cm
     write_result("eval_peg_random_n40_s0", stored, seed=0)
-    reproduce._evaluation("peg", "random", "eval_peg_random_n40_s0", "full", 40, 0, 1)
+    reproduce.stored_or_new_evaluation("peg", "random", "eval_peg_random_n40_s0", "full", 40, 0, 1)
     assert len(fresh) == 1  # the peg's are
     # The force table needs figures older evaluations lack: those are measured again.
-    reproduce._evaluation(
+    reproduce.stored_or_new_evaluation(
         "peg",
         "random",
         "eval_peg_random_n40_s0",
@@ -270,7 +272,7 @@ def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch):
         asked.append((task, policy))
         return _fake_evaluation(task, policy, name, *args, **kwargs)
 
-    monkeypatch.setattr(reproduce, "_evaluation", recording_evaluation)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
     )

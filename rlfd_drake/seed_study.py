@@ -1,0 +1,255 @@
+"""A training recipe's spread over seeds (``rlfd seeds``).
+
+One run folder per training seed, all made by the same ``rlfd train`` configuration
+apart from the seed. Each run's policy is evaluated on each task with its mean action
+and with sampled actions; ``results/seeds_<name>.{json,md}`` get each seed's success,
+the mean +- sample standard deviation (ddof 1) over the seeds, each run's training
+episodes and wall-clock time, and, given targets, on how many seeds they are met.
+
+Evaluations are stored under the names ``rlfd evaluate`` gives them and reused when one
+of the same size and seed exists, so re-running a study after adding a seed evaluates
+only the new seed. Run folders are local (``runs/`` is not committed): a folder that
+is missing here is read from its copied log ``results/train_<folder name>/`` and its
+stored evaluations.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rlfd_drake.evaluate import evaluation_name
+from rlfd_drake.reproduce import stored_or_new_evaluation
+from rlfd_drake.results import results_dir, write_result
+
+__all__ = ["SeedRun", "load_seed_run", "seed_study", "study_name"]
+
+#: Evaluations per run and task: (label, sample the policy's actions).
+_ACTIONS = (("mean", False), ("sampled", True))
+
+
+@dataclass(frozen=True)
+class SeedRun:
+    """A training run of a seed study: its folder, training configuration, the command
+    that trained it and its metrics."""
+
+    folder: Path
+    config: dict
+    command: str | None
+    metrics: dict
+
+    @property
+    def seed(self) -> int:
+        return int(self.config["seed"])
+
+    @property
+    def policy(self) -> Path:
+        return self.folder / "policy.zip"
+
+
+def load_seed_run(folder: str | Path) -> SeedRun:
+    """The run in ``folder``, or (a run of another machine) its log copied into
+    ``results/train_<folder name>/``; ValueError if neither holds config.json and
+    metrics.json (a run still training has no metrics.json yet)."""
+    folder = Path(folder)
+    for base in (folder, results_dir() / f"train_{folder.name}"):
+        config, metrics = base / "config.json", base / "metrics.json"
+        if config.is_file() and metrics.is_file():
+            recorded = json.loads(config.read_text())
+            return SeedRun(
+                folder, recorded["config"], recorded.get("command"), json.loads(metrics.read_text())
+            )
+    raise ValueError(
+        f"run folder {str(folder)!r}: no finished run (config.json and metrics.json) there "
+        f"or in results/train_{folder.name}/"
+    )
+
+
+def _check_one_recipe(runs: list[SeedRun]) -> None:
+    """ValueError unless the runs differ in their seed and nothing else."""
+    seeds = [run.seed for run in runs]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"runs: each seed once, got seeds {seeds}")
+    first = runs[0]
+    for run in runs[1:]:
+        for key in sorted(set(first.config) | set(run.config)):
+            if key == "seed":
+                continue
+            if first.config.get(key) != run.config.get(key):
+                raise ValueError(
+                    f"runs {str(first.folder)!r} and {str(run.folder)!r} differ in {key}: "
+                    f"{first.config.get(key)!r} vs {run.config.get(key)!r} (a seed study "
+                    "compares seeds of one recipe)"
+                )
+
+
+def study_name(folders: list[str | Path]) -> str:
+    """The folders' common name without its seed suffix, e.g. ``peg_easy_sac_gs4`` for
+    ``runs/peg_easy_sac_gs4_s0`` and ``runs/peg_easy_sac_gs4_s1``."""
+    stems = {re.sub(r"_s\d+$", "", Path(folder).name) for folder in folders}
+    if len(stems) != 1:
+        raise ValueError(f"name: the run folders have no common name, pass one ({sorted(stems)})")
+    return stems.pop()
+
+
+def _spread(values: list[float]) -> dict:
+    return {
+        "mean": float(np.mean(values)),
+        "std": float(np.std(values, ddof=1)) if len(values) > 1 else None,
+        "min": float(np.min(values)),
+        "max": float(np.max(values)),
+    }
+
+
+def seed_study(
+    folders: list[str | Path],
+    tasks: list[str],
+    episodes: int = 200,
+    seed: int = 0,
+    workers: int = 2,
+    targets: dict[str, float] | None = None,
+    name: str | None = None,
+) -> dict:
+    """Evaluates (or reuses the stored evaluations of) every run on every task and
+    writes ``results/seeds_<name>.{json,md}``; returns the JSON's data.
+
+    Args:
+        folders: one ``rlfd train`` run folder per seed.
+        tasks: the evaluation tasks (e.g. the training task and a harder one).
+        episodes, seed, workers: as ``rlfd evaluate``'s.
+        targets: success % per task that the mean action should reach (e.g. the
+            paper's); the study counts the seeds that reach all of them.
+        name: results file stem after ``seeds_`` (default: the folders' common name).
+    """
+    if not folders:
+        raise ValueError("folders: give at least one run folder")
+    if not tasks:
+        raise ValueError("tasks: give at least one task")
+    targets = dict(targets or {})
+    for task, target in targets.items():
+        if task not in tasks:
+            raise ValueError(f"targets: task {task!r} is not evaluated (tasks: {tasks})")
+        if not 0.0 <= target <= 100.0:
+            raise ValueError(f"targets: {task} must be a success % in [0, 100], got {target}")
+    name = name or study_name(folders)
+    runs = sorted((load_seed_run(folder) for folder in folders), key=lambda run: run.seed)
+    _check_one_recipe(runs)
+    mode = runs[0].config.get("residual_mode", "full")
+    composition = runs[0].config.get("composition", "residual")
+
+    per_seed = []
+    for run in runs:
+        row = {
+            "seed": run.seed,
+            "folder": str(run.folder),
+            "training_episodes": run.metrics.get("episodes"),
+            "training_wall_time_s": run.metrics.get("wall_time_s"),
+            "success": {},
+            "evaluations": {},
+        }
+        for task in tasks:
+            for label, stochastic in _ACTIONS:
+                evaluation = evaluation_name(task, str(run.policy), mode, stochastic, seed)
+                result = stored_or_new_evaluation(
+                    task,
+                    str(run.policy),
+                    evaluation,
+                    mode,
+                    episodes,
+                    seed,
+                    workers,
+                    stochastic,
+                    composition,
+                    available=run.policy.is_file(),
+                )
+                if result is None:
+                    raise ValueError(
+                        f"run {str(run.folder)!r}: no policy.zip to evaluate and no stored "
+                        f"results/{evaluation}.json of {episodes} episodes, seed {seed}"
+                    )
+                row["success"][f"{task}/{label}"] = 100.0 * result["success_rate"]
+                row["evaluations"][f"{task}/{label}"] = evaluation
+        row["meets_targets"] = all(
+            row["success"][f"{task}/mean"] >= target for task, target in targets.items()
+        )
+        per_seed.append(row)
+
+    columns = [f"{task}/{label}" for task in tasks for label, _ in _ACTIONS]
+    data = {
+        "name": name,
+        "recipe": {key: value for key, value in runs[0].config.items() if key != "seed"},
+        "commands": [run.command for run in runs],
+        "tasks": tasks,
+        "evaluation_episodes": episodes,
+        "evaluation_seed": seed,
+        "targets": targets,
+        "per_seed": per_seed,
+        "over_seeds": {
+            column: _spread([row["success"][column] for row in per_seed]) for column in columns
+        },
+        "training_wall_time_s": _spread(
+            [row["training_wall_time_s"] for row in per_seed if row["training_wall_time_s"]]
+        )
+        if any(row["training_wall_time_s"] for row in per_seed)
+        else None,
+        "seeds_meeting_targets": sum(row["meets_targets"] for row in per_seed) if targets else None,
+    }
+    write_result(f"seeds_{name}", data, seed=seed)
+    (results_dir() / f"seeds_{name}.md").write_text(seed_study_markdown(data))
+    return data
+
+
+def seed_study_markdown(data: dict) -> str:
+    """The study as a Markdown table: one row per seed, then mean +- std over seeds."""
+    columns = [f"{task}/{label}" for task in data["tasks"] for label, _ in _ACTIONS]
+    targets = data["targets"]
+    lines = [
+        f"# Seed study: {data['name']}",
+        "",
+        f"Success % over {data['evaluation_episodes']} evaluation starts (evaluation seed "
+        f"{data['evaluation_seed']}), with the policy's mean action and with sampled actions.",
+        "Training commands:",
+        "",
+        *[f"    {command}" for command in data["commands"] if command],
+        "",
+        "| training seed | episodes | wall-clock (s) | "
+        + " | ".join(f"{column.replace('/', ', ')}" for column in columns)
+        + (" | meets targets |" if targets else " |"),
+        "|---" * (3 + len(columns) + bool(targets)) + "|",
+    ]
+    for row in data["per_seed"]:
+        wall = row["training_wall_time_s"]
+        cells = [
+            str(row["seed"]),
+            str(row["training_episodes"]),
+            f"{wall:.0f}" if wall else "-",
+            *[f"{row['success'][column]:.1f}" for column in columns],
+        ]
+        if targets:
+            cells.append("yes" if row["meets_targets"] else "no")
+        lines.append("| " + " | ".join(cells) + " |")
+    n = len(data["per_seed"])
+    spread = data["over_seeds"]
+    cells = [
+        f"mean +- std over {n} seeds",
+        "",
+        "",
+        *[
+            f"{spread[c]['mean']:.1f}"
+            + (f" +- {spread[c]['std']:.1f}" if spread[c]["std"] is not None else "")
+            for c in columns
+        ],
+    ]
+    if targets:
+        cells.append(f"{data['seeds_meeting_targets']} of {n}")
+    lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    if targets:
+        wanted = ", ".join(f"{task} >= {target:g} %" for task, target in targets.items())
+        lines.append(f"Targets (mean action): {wanted}.")
+    lines.append("The std is the sample standard deviation over training seeds (ddof 1).")
+    return "\n".join(lines) + "\n"

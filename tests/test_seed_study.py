@@ -1,0 +1,131 @@
+"""rlfd seeds: a recipe's spread over training seeds, from stored or new evaluations."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import rlfd_drake.evaluate as evaluate_module
+from rlfd_drake.cli import main
+from rlfd_drake.diagram import RlfdDiagramConfig
+from rlfd_drake.evaluate import evaluation_name
+from rlfd_drake.paths import SHIPPED_POLICY, model_path
+from rlfd_drake.results import write_result
+from rlfd_drake.seed_study import load_seed_run, seed_study, study_name
+from rlfd_drake.tasks import load_task
+
+RECIPE = {"task": "peg_easy", "algo": "sac", "episodes": 700, "residual_mode": "translation"}
+
+
+def _run_folder(tmp_path, seed, **changes):
+    folder = tmp_path / "runs" / f"recipe_s{seed}"
+    folder.mkdir(parents=True)
+    config = {**RECIPE, **changes, "seed": seed}
+    command = f"rlfd train --seed {seed} --out {folder}"
+    (folder / "config.json").write_text(json.dumps({"config": config, "command": command}))
+    (folder / "metrics.json").write_text(
+        json.dumps({"episodes": 700, "wall_time_s": 1000.0 + seed})
+    )
+    return folder
+
+
+def _store_evaluation(folder, task, stochastic, success_rate, episodes=200):
+    name = evaluation_name(task, str(folder / "policy.zip"), "translation", stochastic, 0)
+    bounds = list(RlfdDiagramConfig().residual_bounds(load_task(task)))
+    data = {
+        "task": task,
+        "episodes": episodes,
+        "seed": 0,
+        "composition": "residual",
+        "residual_bounds": bounds,
+        "success_rate": success_rate,
+    }
+    write_result(name, data, seed=0, command="rlfd evaluate (stored for the test)")
+
+
+def _never_evaluate(*args, **kwargs):
+    raise AssertionError("a stored evaluation should have been reused")
+
+
+def test_study_reuses_stored_evaluations_and_reports_the_spread(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    easy = {0: 0.955, 1: 0.85, 2: 0.92}
+    hard = {0: 0.62, 1: 0.48, 2: 0.53}
+    folders = []
+    for seed in (2, 0, 1):  # any order; the table is by seed
+        folder = _run_folder(tmp_path, seed)
+        folders.append(folder)
+        for stochastic, offset in ((False, 0.0), (True, 0.01)):
+            _store_evaluation(folder, "peg_easy", stochastic, easy[seed] + offset)
+            _store_evaluation(folder, "peg_hard", stochastic, hard[seed] + offset)
+    data = seed_study(
+        folders, ["peg_easy", "peg_hard"], targets={"peg_easy": 95.0, "peg_hard": 55.0}
+    )
+    assert data["name"] == "recipe"
+    assert [row["seed"] for row in data["per_seed"]] == [0, 1, 2]
+    assert [row["meets_targets"] for row in data["per_seed"]] == [True, False, False]
+    assert data["seeds_meeting_targets"] == 1
+    spread = data["over_seeds"]["peg_easy/mean"]
+    values = [95.5, 85.0, 92.0]
+    assert spread["mean"] == pytest.approx(np.mean(values))
+    assert spread["std"] == pytest.approx(np.std(values, ddof=1))
+    assert data["over_seeds"]["peg_hard/sampled"]["mean"] == pytest.approx(55.33333, abs=1e-4)
+    assert data["training_wall_time_s"]["mean"] == pytest.approx(1001.0)
+    assert data["recipe"] == {key: value for key, value in RECIPE.items()}
+    markdown = (tmp_path / "results" / "seeds_recipe.md").read_text()
+    assert "| 0 | 700 | 1000 | 95.5 | 96.5 | 62.0 | 63.0 | yes |" in markdown
+    assert "90.8 +- 5.3" in markdown and "1 of 3" in markdown
+    stored = json.loads((tmp_path / "results" / "seeds_recipe.json").read_text())
+    assert stored["seed"] == 0 and stored["data"]["seeds_meeting_targets"] == 1
+
+
+def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    a = _run_folder(tmp_path, 0)
+    b = _run_folder(tmp_path, 1, sac_gradient_steps=8)
+    with pytest.raises(ValueError, match="differ in sac_gradient_steps: None vs 8"):
+        seed_study([a, b], ["peg_easy"])
+    with pytest.raises(ValueError, match="each seed once"):
+        seed_study([a, a], ["peg_easy"])
+    with pytest.raises(ValueError, match="targets: task 'peg_hard' is not evaluated"):
+        seed_study([a], ["peg_easy"], targets={"peg_hard": 55.0})
+    with pytest.raises(ValueError, match=r"targets: peg_easy must be a success % in \[0, 100\]"):
+        seed_study([a], ["peg_easy"], targets={"peg_easy": 0.95e3})
+    with pytest.raises(ValueError, match="no finished run"):
+        load_seed_run(tmp_path / "runs" / "missing_s0")
+    # Neither a policy to evaluate nor a stored evaluation: say which run and file.
+    with pytest.raises(ValueError, match="no policy.zip to evaluate and no stored"):
+        seed_study([a], ["peg_easy"])
+    with pytest.raises(ValueError, match="no common name"):
+        study_name(["runs/a_s0", "runs/b_s1"])
+    assert main(["seeds", "--runs", str(a), "--target", "peg_easy:95"]) == 2
+
+
+def test_a_copied_training_log_stands_in_for_a_missing_run_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    folder = _run_folder(tmp_path, 3)
+    copy = tmp_path / "results" / f"train_{folder.name}"
+    shutil.copytree(folder, copy)
+    shutil.rmtree(folder)
+    run = load_seed_run(folder)
+    assert run.seed == 3 and run.command.startswith("rlfd train --seed 3")
+
+
+def test_study_evaluates_a_run_that_has_no_stored_evaluation(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    shipped = model_path(SHIPPED_POLICY)
+    folder = tmp_path / "runs" / "shipped_s0"
+    folder.mkdir(parents=True)
+    shutil.copy(shipped, folder / "policy.zip")
+    shutil.copy(shipped.with_suffix(".json"), folder / "config.json")
+    (folder / "metrics.json").write_text(json.dumps({"episodes": 700, "wall_time_s": 1168.0}))
+    data = seed_study([folder], ["peg_easy"], episodes=1, workers=1)
+    row = data["per_seed"][0]
+    for column in ("peg_easy/mean", "peg_easy/sampled"):
+        assert row["success"][column] in (0.0, 100.0)  # one episode
+        assert (tmp_path / "results" / f"{row['evaluations'][column]}.json").is_file()
+    assert data["over_seeds"]["peg_easy/mean"]["std"] is None  # one seed has no spread
