@@ -319,6 +319,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         log_std_init=args.log_std_init,
         learning_rate=args.learning_rate,
         sac_learning_starts=args.sac_learning_starts,
+        sac_initial_ent_coef=args.sac_initial_ent_coef,
         sac_gradient_steps=args.sac_gradient_steps,
         composition=args.composition,
         init_from=args.init_from,
@@ -523,6 +524,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="SAC: steps explored with the initial policy before the first update",
+    )
+    train.add_argument(
+        "--sac-initial-ent-coef",
+        type=float,
+        default=0.01,
+        help="SAC: initial entropy coefficient (then tuned to --sac-target-entropy)",
     )
     train.add_argument(
         "--sac-gradient-steps",

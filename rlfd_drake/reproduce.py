@@ -115,13 +115,21 @@ def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sa
 #: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
 #: trains it). A row "run:<key>" evaluates the folder's policy.zip on each column's task.
 RUNS: dict[str, dict[str, tuple[str, str]]] = {
-    # Full-pose rLfD per task with SAC (Table IV). On RJ-45 SAC collapsed once its
-    # updates began (its critic, fitted to a narrow exploration, led the actor off the
-    # data: 0 successes against the DMP's ~30%); the PPO runs below are the paper's.
+    # Full-pose rLfD per task with SAC (Table IV). On RJ-45 a first run collapsed once
+    # its updates began (0 successes against the DMP's ~30%, results/
+    # train_rj45_sac_collapsed/): its narrow policy (log pi ~ 6.5) made SAC's soft
+    # value charge alpha * log pi per step alive, so breaking the force limit early
+    # paid. Its entropy coefficient now starts at 1e-4 and is tuned to entropy 0.
     "rlfd": {
         "peg": _run("runs/peg_sac_te1_s0", "peg", 500, _SAC_PEG_RECIPE),
         "gear": _run("runs/gear_sac_te1_s0", "gear", 300, _SAC_PEG_RECIPE),
-        "rj45": _run("runs/rj45_sac_s0", "rj45", 500, f"{_RJ45_RECIPE} --sac-learning-starts 1000"),
+        "rj45": _run(
+            "runs/rj45_sac_te0_s0",
+            "rj45",
+            500,
+            f"{_RJ45_RECIPE} --sac-learning-starts 1000 --sac-target-entropy 0 "
+            "--sac-initial-ent-coef 0.0001",
+        ),
     },
     # Full-pose rLfD per task with PPO (the paper's physical-task policy).
     "rlfd_ppo": {

@@ -168,6 +168,10 @@ def test_sac_target_entropy_reaches_the_model():
         TrainConfig(algo="sac", envs=1, history=1, sac_target_entropy=1.0), fast_venv(), None
     )
     assert wide.target_entropy == 1.0
+    gentle = make_model(
+        TrainConfig(algo="sac", envs=1, history=1, sac_initial_ent_coef=1e-4), fast_venv(), None
+    )
+    assert float(gentle.log_ent_coef.exp()) == pytest.approx(1e-4)
 
 
 def test_sac_gradient_steps_set_the_updates_per_step():
@@ -191,6 +195,8 @@ def test_bad_config_names_the_field():
         TrainConfig(force_limit_n=0.0)
     with pytest.raises(ValueError, match="sac_gradient_steps must be >= 1, got 0"):
         TrainConfig(sac_gradient_steps=0)
+    with pytest.raises(ValueError, match="sac_initial_ent_coef must be a positive number"):
+        TrainConfig(sac_initial_ent_coef=0.0)
 
 
 def test_training_force_limit_ends_episodes_that_push_harder():
