@@ -115,20 +115,16 @@ def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sa
 #: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
 #: trains it). A row "run:<key>" evaluates the folder's policy.zip on each column's task.
 RUNS: dict[str, dict[str, tuple[str, str]]] = {
-    # Full-pose rLfD per task with SAC (Table IV). On RJ-45 a first run collapsed once
-    # its updates began (0 successes against the DMP's ~30%, results/
-    # train_rj45_sac_collapsed/): its narrow policy (log pi ~ 6.5) made SAC's soft
-    # value charge alpha * log pi per step alive, so breaking the force limit early
-    # paid. Its entropy coefficient now starts at 1e-4 and is tuned to entropy 0.
+    # Full-pose rLfD per task with SAC (Table IV). On RJ-45 SAC with the PPO runs'
+    # narrow exploration (log std -2.5) collapsed once its updates began, with alpha
+    # started at 0.01 or 1e-4 (results/train_rj45_sac_collapsed/, ..._te0_collapsed/):
+    # the actor left the ~0.25 mm band of actions its critic was fitted on. This run
+    # explores as the peg runs do (target entropy +1).
     "rlfd": {
         "peg": _run("runs/peg_sac_te1_s0", "peg", 500, _SAC_PEG_RECIPE),
         "gear": _run("runs/gear_sac_te1_s0", "gear", 300, _SAC_PEG_RECIPE),
         "rj45": _run(
-            "runs/rj45_sac_te0_s0",
-            "rj45",
-            500,
-            f"{_RJ45_RECIPE} --sac-learning-starts 1000 --sac-target-entropy 0 "
-            "--sac-initial-ent-coef 0.0001",
+            "runs/rj45_sac_te1_s0", "rj45", 500, f"{_SAC_PEG_RECIPE} --sac-learning-starts 1000"
         ),
     },
     # Full-pose rLfD per task with PPO (the paper's physical-task policy).

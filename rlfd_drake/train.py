@@ -76,12 +76,9 @@ class TrainConfig:
         sac_gradient_steps: SAC updates after each step of the ``envs`` envs (1 with
             two envs: half an update per transition).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
-            coefficient. Its sign matters where episodes can end in failure: a narrow
-            policy has log pi > 0, so SAC's soft value charges alpha * log pi per step
-            alive, and ending the episode early (e.g. breaking a force limit) saves
-            that charge. With alpha = 0.01 and log_std -2.5 on six axes (log pi ~ 6.5)
-            that is ~0.065 per step, ~4 over an RJ-45 episode against a success reward
-            of 1: start alpha small there.
+            coefficient alpha. A narrow policy has log pi > 0, so SAC's soft value then
+            charges alpha * log pi per step alive, which makes ending an episode early
+            (at a force limit) pay; a small start keeps that charge small.
         sac_target_entropy: the entropy SAC's coefficient tuning holds the policy at;
             None = SB3's -dim(A) = -6, i.e. a pre-squashing std of about 0.09 per axis
             (sub-millimetre jiggle). Each +6 multiplies that std by e: +1 keeps it
