@@ -179,6 +179,7 @@ def seed_study(
         per_seed.append(row)
 
     columns = [f"{task}/{label}" for task in tasks for label, _ in _ACTIONS]
+    walls = [row["training_wall_time_s"] for row in per_seed if row["training_wall_time_s"]]
     data = {
         "name": name,
         "recipe": {key: value for key, value in runs[0].config.items() if key != "seed"},
@@ -191,11 +192,7 @@ def seed_study(
         "over_seeds": {
             column: _spread([row["success"][column] for row in per_seed]) for column in columns
         },
-        "training_wall_time_s": _spread(
-            [row["training_wall_time_s"] for row in per_seed if row["training_wall_time_s"]]
-        )
-        if any(row["training_wall_time_s"] for row in per_seed)
-        else None,
+        "training_wall_time_s": _spread(walls) if walls else None,
         "seeds_meeting_targets": sum(row["meets_targets"] for row in per_seed) if targets else None,
     }
     write_result(f"seeds_{name}", data, seed=seed)
