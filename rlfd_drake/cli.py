@@ -325,6 +325,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         init_from=args.init_from,
         force_limit_n=args.force_limit_n,
         scaled_observation=args.scaled_observation,
+        applied_action_only=args.applied_action_only,
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -565,6 +566,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="a fixed input layer brings the contact features (lateral position, wrist "
         "wrench) to order one (observation_scaling.CONTACT_SCALES)",
+    )
+    train.add_argument(
+        "--applied-action-only",
+        action="store_true",
+        help="with --residual-mode translation or orientation: the policy outputs only "
+        "that 3-D part of the residual",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

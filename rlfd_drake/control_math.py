@@ -229,6 +229,26 @@ RESIDUAL_MODES: tuple[str, ...] = ("full", "translation", "orientation", "off")
 COMPOSITIONS: tuple[str, ...] = ("residual", "hybrid", "pure")
 
 
+#: Where a 3-D action of a translation-only or orientation-only policy sits in the 6-D
+#: residual.
+RESIDUAL_PARTS: dict[str, slice] = {"translation": slice(0, 3), "orientation": slice(3, 6)}
+
+
+def pad_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
+    """The 6-D residual of a policy that sets only the ``mode`` part ("translation" or
+    "orientation"): its (3,) action there, zeros elsewhere."""
+    if mode not in RESIDUAL_PARTS:
+        raise ValueError(
+            f"residual mode must be one of {tuple(RESIDUAL_PARTS)} for a 3-D action, got {mode!r}"
+        )
+    action = np.asarray(action, dtype=float).reshape(-1)
+    if action.shape != (3,):
+        raise ValueError(f"action must be 3 numbers ({mode}), got {action!r}")
+    full = np.zeros(6)
+    full[RESIDUAL_PARTS[mode]] = action
+    return full
+
+
 def scale_residual(
     residual: np.ndarray, max_translation_m: float, max_rotation_rad: float, mode: str = "full"
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ import numpy as np
 from pydrake.gym import DrakeGymEnv
 from pydrake.systems.analysis import Simulator
 
+from rlfd_drake.control_math import pad_residual_part
 from rlfd_drake.diagram import (
     RESIDUAL_SIZE,
     BuildRlfdDiagram,
@@ -368,6 +369,25 @@ class RlfdEnv(DrakeGymEnv):
             self.simulator.get_system().ForcedPublish(self.simulator.get_context())
             return None
         return None
+
+
+class AppliedResidualAction(gym.ActionWrapper):
+    """An RlfdEnv whose action is only the part of the residual ``residual_mode``
+    applies: 3-D (translation, or angle-axis orientation, in [-1, 1]), the other part
+    zero (``control_math.pad_residual_part``). A policy trained on it has no outputs
+    that do nothing; on the 6-D action of a translation-only env the three orientation
+    outputs are ignored by the composer, yet the critic must learn to ignore them and
+    SAC's entropy tuning counts them. ``policies.DeployedPolicy`` pads such a policy's
+    action the same way in the diagram."""
+
+    def __init__(self, env: gym.Env, residual_mode: str):
+        pad_residual_part(np.zeros(3), residual_mode)  # ValueError naming a bad mode
+        super().__init__(env)
+        self.residual_mode = residual_mode
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        return pad_residual_part(action, self.residual_mode).astype(np.float32)
 
 
 def register_envs() -> None:

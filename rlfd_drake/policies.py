@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rlfd_drake.control_math import RESIDUAL_MODES
+from rlfd_drake.control_math import RESIDUAL_MODES, RESIDUAL_PARTS, pad_residual_part
 
 #: Algorithm name -> (module, class) of its SB3 implementation.
 SB3_CLASSES = {
@@ -244,9 +244,6 @@ class DeployedPolicy:
         else:
             action, _ = self.model.predict(self._stack, deterministic=self.deterministic)
         action = np.asarray(action, dtype=float).reshape(-1)
-        if action.size == 3 and self.residual_mode in ("translation", "orientation"):
-            full = np.zeros(6)
-            full[0:3] = action if self.residual_mode == "translation" else 0.0
-            full[3:6] = action if self.residual_mode == "orientation" else 0.0
-            return full
+        if action.size == 3 and self.residual_mode in RESIDUAL_PARTS:
+            return pad_residual_part(action, self.residual_mode)
         return action

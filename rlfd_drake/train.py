@@ -36,8 +36,9 @@ from stable_baselines3.common.callbacks import (
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
+from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
-from rlfd_drake.env import ENV_IDS, RlfdEnv
+from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv
 from rlfd_drake.observation_scaling import ScaledObservation
 from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import invoked_command, utc_now
@@ -89,6 +90,9 @@ class TrainConfig:
             this run (transfer, Table VI); None = a new zero-output policy.
         scaled_observation: start the networks with a fixed input layer that brings
             the contact features to order one (``observation_scaling.CONTACT_SCALES``).
+        applied_action_only: in "translation" or "orientation" mode, the policy's
+            action is only that 3-D part (``env.AppliedResidualAction``), not the 6-D
+            residual whose other half the composer ignores.
         force_limit_n: a contact-force limit for the training episodes only, N
             (checked on the 20 ms low-passed force, like the task's own): an episode
             that exceeds it ends as a failure, as a Panda's collision reflex would stop
@@ -121,6 +125,7 @@ class TrainConfig:
     init_from: str | None = None
     force_limit_n: float | None = None
     scaled_observation: bool = False
+    applied_action_only: bool = False
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -142,6 +147,11 @@ class TrainConfig:
             raise ValueError(f"sac_learning_starts must be >= 0, got {self.sac_learning_starts}")
         if self.eval_every_episodes < 0:
             raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
+        if self.applied_action_only and self.residual_mode not in RESIDUAL_PARTS:
+            raise ValueError(
+                f"applied_action_only needs residual_mode in {tuple(RESIDUAL_PARTS)}, got "
+                f"{self.residual_mode!r}"
+            )
         if self.sac_target_entropy is not None and not np.isfinite(self.sac_target_entropy):
             raise ValueError(f"sac_target_entropy must be finite, got {self.sac_target_entropy}")
         if not (np.isfinite(self.sac_initial_ent_coef) and self.sac_initial_ent_coef > 0):
@@ -185,6 +195,10 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
         n_envs=n_envs,
         seed=seed,
         env_kwargs=_env_kwargs(config),
+        wrapper_class=AppliedResidualAction if config.applied_action_only else None,
+        wrapper_kwargs={"residual_mode": config.residual_mode}
+        if config.applied_action_only
+        else None,
         vec_env_cls=vec_cls,
         vec_env_kwargs=vec_kwargs,
     )

@@ -201,3 +201,26 @@ def test_pure_composition_acts_from_the_start_and_moves_the_setpoint():
     assert np.isfinite(reward_still) and reward_still < 0.0
     with pytest.raises(ValueError, match="composition"):
         RlfdEnv("peg_easy", composition="mixed")
+
+
+def test_applied_residual_action_pads_the_3d_action_into_its_part():
+    from rlfd_drake.env import AppliedResidualAction
+
+    class Recorder(gym.Env):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
+
+        def step(self, action):
+            self.last = action
+            return np.zeros(1, np.float32), 0.0, False, False, {}
+
+    for mode, part in (("translation", slice(0, 3)), ("orientation", slice(3, 6))):
+        env = AppliedResidualAction(Recorder(), mode)
+        assert env.action_space.shape == (3,)
+        env.step(np.array([0.1, -0.2, 0.3], np.float32))
+        np.testing.assert_allclose(env.unwrapped.last[part], [0.1, -0.2, 0.3], atol=1e-7)
+        assert np.count_nonzero(env.unwrapped.last) == 3
+    with pytest.raises(ValueError, match="residual mode must be one of"):
+        AppliedResidualAction(Recorder(), "full")
+    with pytest.raises(ValueError, match="action must be 3 numbers"):
+        AppliedResidualAction(Recorder(), "translation").step(np.zeros(6, np.float32))

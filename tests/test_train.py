@@ -280,3 +280,38 @@ def test_sac_warm_up_explores_with_its_policy_not_uniform_samples():
     actions = np.array([model._sample_action(1000)[0] for _ in range(200)])
     assert np.max(np.abs(actions)) < 0.3  # std 0.05; uniform would reach ~1
     assert np.std(actions) > 0.01
+
+
+def test_applied_action_only_trains_a_3d_policy_that_deploys_padded(tmp_path):
+    from rlfd_drake.policies import DeployedPolicy
+    from rlfd_drake.train import make_envs
+
+    config = TrainConfig(
+        algo="sac",
+        envs=1,
+        history=1,
+        residual_mode="translation",
+        applied_action_only=True,
+        sac_learning_starts=4,
+    )
+    venv = make_envs(config, 1, seed=0)
+    assert venv.action_space.shape == (3,)
+    model = make_model(config, venv, None)
+    before = _parameters(model)
+    model.learn(total_timesteps=8)
+    assert _changed(before, model)
+    model.save(tmp_path / "policy.zip")
+    loaded = load_model(tmp_path / "policy.zip")
+    deployed = DeployedPolicy(loaded, residual_mode="translation")
+    observation = venv.reset()
+    expected, _ = loaded.predict(observation, deterministic=True)
+    action = deployed(observation[0])
+    assert action.shape == (6,)
+    np.testing.assert_allclose(action[:3], expected[0], rtol=0, atol=1e-7)
+    np.testing.assert_array_equal(action[3:], 0.0)
+    venv.close()
+
+
+def test_applied_action_only_needs_a_partial_residual_mode():
+    with pytest.raises(ValueError, match="applied_action_only needs residual_mode"):
+        TrainConfig(residual_mode="full", applied_action_only=True)
