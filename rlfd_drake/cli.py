@@ -392,6 +392,7 @@ def _cmd_seeds(args: argparse.Namespace) -> int:
         workers=args.workers,
         targets=_parse_targets(args.target),
         name=args.name,
+        actions=tuple(args.actions),
     )
     for column, spread in data["over_seeds"].items():
         std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
@@ -630,6 +631,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="TASK=PERCENT the mean action should reach, e.g. peg_easy=95 peg_hard=55",
     )
     seeds.add_argument("--name", default=None, help="results/seeds_<name> (default: the runs')")
+    seeds.add_argument(
+        "--actions",
+        nargs="+",
+        choices=["mean", "sampled"],
+        default=["mean", "sampled"],
+        help="evaluate the policies' mean action and/or sampled actions",
+    )
     seeds.set_defaults(func=_cmd_seeds)
 
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")

@@ -26,10 +26,10 @@ from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
 from rlfd_drake.results import results_dir, write_result
 
-__all__ = ["SeedRun", "load_seed_run", "seed_study", "study_name"]
+__all__ = ["ACTIONS", "SeedRun", "load_seed_run", "seed_study", "study_name"]
 
-#: Evaluations per run and task: (label, sample the policy's actions).
-_ACTIONS = (("mean", False), ("sampled", True))
+#: How a run's policy can act in an evaluation: label -> sample its actions.
+ACTIONS = {"mean": False, "sampled": True}
 
 
 @dataclass(frozen=True)
@@ -113,6 +113,7 @@ def seed_study(
     workers: int = 2,
     targets: dict[str, float] | None = None,
     name: str | None = None,
+    actions: tuple[str, ...] = tuple(ACTIONS),
 ) -> dict:
     """Evaluates (or reuses the stored evaluations of) every run on every task and
     writes ``results/seeds_<name>.{json,md}``; returns the JSON's data.
@@ -124,12 +125,18 @@ def seed_study(
         targets: success % per task that the mean action should reach (e.g. the
             paper's); the study counts the seeds that reach all of them.
         name: results file stem after ``seeds_`` (default: the folders' common name).
+        actions: which of ``ACTIONS`` to evaluate ("mean" is needed for targets).
     """
     if not folders:
         raise ValueError("folders: give at least one run folder")
     if not tasks:
         raise ValueError("tasks: give at least one task")
+    actions = tuple(actions)
+    if not actions or any(action not in ACTIONS for action in actions):
+        raise ValueError(f"actions must be among {tuple(ACTIONS)}, got {actions}")
     targets = dict(targets or {})
+    if targets and "mean" not in actions:
+        raise ValueError("targets are checked on the mean action: actions must include 'mean'")
     for task, target in targets.items():
         if task not in tasks:
             raise ValueError(f"targets: task {task!r} is not evaluated (tasks: {tasks})")
@@ -152,7 +159,8 @@ def seed_study(
             "evaluations": {},
         }
         for task in tasks:
-            for label, stochastic in _ACTIONS:
+            for label in actions:
+                stochastic = ACTIONS[label]
                 evaluation = evaluation_name(task, str(run.policy), mode, stochastic, seed)
                 result = stored_or_new_evaluation(
                     task,
@@ -178,13 +186,14 @@ def seed_study(
         )
         per_seed.append(row)
 
-    columns = [f"{task}/{label}" for task in tasks for label, _ in _ACTIONS]
+    columns = [f"{task}/{label}" for task in tasks for label in actions]
     walls = [row["training_wall_time_s"] for row in per_seed if row["training_wall_time_s"]]
     data = {
         "name": name,
         "recipe": {key: value for key, value in runs[0].config.items() if key != "seed"},
         "commands": [run.command for run in runs],
         "tasks": tasks,
+        "columns": columns,
         "evaluation_episodes": episodes,
         "evaluation_seed": seed,
         "targets": targets,
@@ -202,13 +211,13 @@ def seed_study(
 
 def seed_study_markdown(data: dict) -> str:
     """The study as a Markdown table: one row per seed, then mean +- std over seeds."""
-    columns = [f"{task}/{label}" for task in data["tasks"] for label, _ in _ACTIONS]
+    columns = data["columns"]
     targets = data["targets"]
     lines = [
         f"# Seed study: {data['name']}",
         "",
         f"Success % over {data['evaluation_episodes']} evaluation starts (evaluation seed "
-        f"{data['evaluation_seed']}), with the policy's mean action and with sampled actions.",
+        f"{data['evaluation_seed']}); mean = the policy's mean action, sampled = sampled actions.",
         "Training commands:",
         "",
         *[f"    {command}" for command in data["commands"] if command],

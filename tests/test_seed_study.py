@@ -81,6 +81,11 @@ def test_study_reuses_stored_evaluations_and_reports_the_spread(tmp_path, monkey
     assert "90.8 +- 5.3" in markdown and "1 of 3" in markdown
     stored = json.loads((tmp_path / "results" / "seeds_recipe.json").read_text())
     assert stored["seed"] == 0 and stored["data"]["seeds_meeting_targets"] == 1
+    # The mean action alone: its columns only.
+    mean_only = seed_study(folders, ["peg_hard"], actions=("mean",), name="recipe_mean")
+    assert mean_only["columns"] == ["peg_hard/mean"]
+    assert mean_only["over_seeds"]["peg_hard/mean"]["mean"] == pytest.approx(54.33333, abs=1e-4)
+    assert "peg_hard, sampled" not in (tmp_path / "results" / "seeds_recipe_mean.md").read_text()
 
 
 def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, monkeypatch):
@@ -95,6 +100,10 @@ def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, mon
         seed_study([a], ["peg_easy"], targets={"peg_hard": 55.0})
     with pytest.raises(ValueError, match=r"targets: peg_easy must be a success % in \[0, 100\]"):
         seed_study([a], ["peg_easy"], targets={"peg_easy": 0.95e3})
+    with pytest.raises(ValueError, match="actions must be among"):
+        seed_study([a], ["peg_easy"], actions=("greedy",))
+    with pytest.raises(ValueError, match="targets are checked on the mean action"):
+        seed_study([a], ["peg_easy"], targets={"peg_easy": 95.0}, actions=("sampled",))
     with pytest.raises(ValueError, match="no finished run"):
         load_seed_run(tmp_path / "runs" / "missing_s0")
     # Neither a policy to evaluate nor a stored evaluation: say which run and file.
