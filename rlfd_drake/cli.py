@@ -382,7 +382,7 @@ def _parse_targets(items: list[str]) -> dict[str, float]:
 
 
 def _cmd_seeds(args: argparse.Namespace) -> int:
-    from rlfd_drake.seed_study import seed_study
+    from rlfd_drake.seed_study import format_spread, seed_study
 
     data = seed_study(
         args.runs,
@@ -395,8 +395,7 @@ def _cmd_seeds(args: argparse.Namespace) -> int:
         actions=tuple(args.actions),
     )
     for column, spread in data["over_seeds"].items():
-        std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
-        print(f"{column}: {spread['mean']:.1f}{std} % over {len(data['per_seed'])} seeds")
+        print(f"{column}: {format_spread(spread)} % over {len(data['per_seed'])} seeds")
     if data["targets"]:
         print(
             f"seeds meeting the targets: {data['seeds_meeting_targets']} of {len(data['per_seed'])}"

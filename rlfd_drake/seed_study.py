@@ -26,7 +26,7 @@ from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
 from rlfd_drake.results import results_dir, write_result
 
-__all__ = ["ACTIONS", "SeedRun", "load_seed_run", "seed_study", "study_name"]
+__all__ = ["ACTIONS", "SeedRun", "format_spread", "load_seed_run", "seed_study", "study_name"]
 
 #: How a run's policy can act in an evaluation: label -> sample its actions.
 ACTIONS = {"mean": False, "sampled": True}
@@ -103,6 +103,12 @@ def _spread(values: list[float]) -> dict:
         "min": float(np.min(values)),
         "max": float(np.max(values)),
     }
+
+
+def format_spread(spread: dict) -> str:
+    """``mean +- std`` of a ``_spread`` (the mean alone for a single seed)."""
+    std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
+    return f"{spread['mean']:.1f}{std}"
 
 
 def seed_study(
@@ -244,11 +250,7 @@ def seed_study_markdown(data: dict) -> str:
         f"mean +- std over {n} seeds",
         "",
         "",
-        *[
-            f"{spread[c]['mean']:.1f}"
-            + (f" +- {spread[c]['std']:.1f}" if spread[c]["std"] is not None else "")
-            for c in columns
-        ],
+        *[format_spread(spread[column]) for column in columns],
     ]
     if targets:
         cells.append(f"{data['seeds_meeting_targets']} of {n}")

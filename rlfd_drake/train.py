@@ -190,16 +190,21 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
     """The (vectorised, history-stacked for SAC) training or evaluation envs."""
     vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
     vec_kwargs = {"start_method": "spawn"} if n_envs > 1 else None
+    wrapper = (
+        dict(
+            wrapper_class=AppliedResidualAction,
+            wrapper_kwargs={"residual_mode": config.residual_mode},
+        )
+        if config.applied_action_only
+        else {}
+    )
     venv = make_vec_env(
         RlfdEnv,
         n_envs=n_envs,
         seed=seed,
         env_kwargs=_env_kwargs(config),
-        wrapper_class=AppliedResidualAction if config.applied_action_only else None,
-        wrapper_kwargs={"residual_mode": config.residual_mode}
-        if config.applied_action_only
-        else None,
         vec_env_cls=vec_cls,
+        **wrapper,
         vec_env_kwargs=vec_kwargs,
     )
     if config.algo == "sac" and config.history > 1:
@@ -406,13 +411,12 @@ class EveryNEpisodes(EventCallback):
         super().__init__(callback)
         self.n_episodes = n_episodes
         self.episodes = episodes_done
-        self._next_trigger = (episodes_done // n_episodes + 1) * n_episodes
 
     def _on_step(self) -> bool:
+        before = self.episodes
         self.episodes += int(np.sum(self.locals["dones"]))
-        if self.episodes < self._next_trigger:
-            return True
-        self._next_trigger = (self.episodes // self.n_episodes + 1) * self.n_episodes
+        if self.episodes // self.n_episodes == before // self.n_episodes:
+            return True  # no multiple of n_episodes reached
         return self._on_event()
 
 
