@@ -264,7 +264,10 @@ def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp
     assert not [policy for policy in evaluated if "sac_te1" in policy]
 
 
-def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    "table, columns", [("2", ("easy", "hard")), ("4", ("peg", "gear", "rj45"))]
+)
+def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch, table, columns):
     monkeypatch.chdir(tmp_path)
     asked = []
 
@@ -276,8 +279,9 @@ def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch):
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
     )
-    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
-    assert ("peg_easy", "force_search") in asked and ("peg_hard", "force_search") in asked
+    data = reproduce.reproduce_table(table, budget="quick", seed=0, workers=1)
+    tasks = reproduce.TABLES[table].columns
+    assert all((tasks[column], "force_search") in asked for column in columns)
     row = next(r for r in data["rows"] if r["label"].startswith("Force-guided search"))
-    assert row["ours"]["hard"]["success_pct"] == pytest.approx(70.0)
-    assert "not in the paper" in (tmp_path / "results" / "table_2.md").read_text()
+    assert all(row["ours"][column]["success_pct"] == pytest.approx(70.0) for column in columns)
+    assert "not in the paper" in (tmp_path / "results" / f"table_{table}.md").read_text()
