@@ -326,6 +326,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         force_limit_n=args.force_limit_n,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
+        # The default stays TrainConfig's (importing it here would load torch).
+        **({} if args.contact_torque_nm is None else {"contact_torque_nm": args.contact_torque_nm}),
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -566,6 +568,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="a fixed input layer brings the contact features (lateral position, wrist "
         "wrench) to order one (observation_scaling.CONTACT_SCALES)",
+    )
+    train.add_argument(
+        "--contact-torque-nm",
+        type=float,
+        help="with --scaled-observation: the wrist torque the input layer maps to one "
+        "unit, N m (default 1, which suits the peg; ~0.05 for the RJ-45 plug)",
     )
     train.add_argument(
         "--applied-action-only",

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from rlfd_drake.systems.observer import OBSERVATION_SIZE
+from rlfd_drake.systems.observer import OBSERVATION_SIZE, OBSERVATION_WRIST_TORQUE
 
 #: Multipliers of the 26 observation entries (layout: ``systems/observer.py``), giving
 #: per unit: 4 mm of lateral position, 2 cm of height, 0.2 rad of orientation error,
@@ -34,6 +34,29 @@ CONTACT_SCALES: tuple[float, ...] = (
     + (1.0, 1.0)  # phase, time
     + (1.0,) * 6  # last residual
 )
+
+
+#: Wrist torque per unit inside the network with ``CONTACT_SCALES``, N m.
+CONTACT_TORQUE_PER_UNIT_NM = 1.0
+
+
+def contact_scales(torque_per_unit_nm: float = CONTACT_TORQUE_PER_UNIT_NM) -> tuple[float, ...]:
+    """``CONTACT_SCALES`` with the wrist torque brought to ``torque_per_unit_nm`` per unit.
+
+    A part's torque on the wrist when it rests on the entrance grows with its size: about
+    1 N m for the 28 mm peg, 0.03-0.1 N m for the 10 g RJ-45 plug (25 N at 1-3 mm off
+    centre), a twentieth of a unit at the default scale.
+
+    Raises:
+        ValueError: ``torque_per_unit_nm`` is not a positive finite number.
+    """
+    if not (np.isfinite(torque_per_unit_nm) and torque_per_unit_nm > 0):
+        raise ValueError(f"torque_per_unit_nm must be a positive number, got {torque_per_unit_nm}")
+    factor = CONTACT_TORQUE_PER_UNIT_NM / float(torque_per_unit_nm)
+    scales = list(CONTACT_SCALES)
+    for i in range(OBSERVATION_WRIST_TORQUE.start, OBSERVATION_WRIST_TORQUE.stop):
+        scales[i] *= factor
+    return tuple(scales)
 
 
 class ScaledObservation(BaseFeaturesExtractor):

@@ -39,7 +39,11 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFram
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv
-from rlfd_drake.observation_scaling import ScaledObservation
+from rlfd_drake.observation_scaling import (
+    CONTACT_TORQUE_PER_UNIT_NM,
+    ScaledObservation,
+    contact_scales,
+)
 from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import invoked_command, utc_now
 from rlfd_drake.tasks import load_task
@@ -90,6 +94,9 @@ class TrainConfig:
             this run (transfer, Table VI); None = a new zero-output policy.
         scaled_observation: start the networks with a fixed input layer that brings
             the contact features to order one (``observation_scaling.CONTACT_SCALES``).
+        contact_torque_nm: with ``scaled_observation``, the wrist torque that the
+            input layer maps to one unit, N m (``observation_scaling.contact_scales``;
+            1 N m suits the peg, a small part such as the RJ-45 plug needs ~0.05).
         applied_action_only: in "translation" or "orientation" mode, the policy's
             action is only that 3-D part (``env.AppliedResidualAction``), not the 6-D
             residual whose other half the composer ignores.
@@ -125,6 +132,7 @@ class TrainConfig:
     init_from: str | None = None
     force_limit_n: float | None = None
     scaled_observation: bool = False
+    contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
 
     def __post_init__(self) -> None:
@@ -170,6 +178,14 @@ class TrainConfig:
             np.isfinite(self.force_limit_n) and self.force_limit_n > 0
         ):
             raise ValueError(f"force_limit_n must be a positive number, got {self.force_limit_n}")
+        if not (np.isfinite(self.contact_torque_nm) and self.contact_torque_nm > 0):
+            raise ValueError(
+                f"contact_torque_nm must be a positive number, got {self.contact_torque_nm}"
+            )
+        if self.contact_torque_nm != CONTACT_TORQUE_PER_UNIT_NM and not self.scaled_observation:
+            raise ValueError(
+                f"contact_torque_nm={self.contact_torque_nm} needs scaled_observation=True"
+            )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
 
@@ -246,7 +262,14 @@ def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
 
 def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
     """A new SB3 model with the paper's architecture where it states one."""
-    inputs = dict(features_extractor_class=ScaledObservation) if config.scaled_observation else {}
+    inputs = (
+        dict(
+            features_extractor_class=ScaledObservation,
+            features_extractor_kwargs={"scales": contact_scales(config.contact_torque_nm)},
+        )
+        if config.scaled_observation
+        else {}
+    )
     common = dict(
         env=venv,
         seed=config.seed,

@@ -10,9 +10,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
 from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.env import RlfdEnv
-from rlfd_drake.observation_scaling import CONTACT_SCALES, ScaledObservation
+from rlfd_drake.observation_scaling import CONTACT_SCALES, ScaledObservation, contact_scales
 from rlfd_drake.policies import DeployedPolicy, load_sb3_model
-from rlfd_drake.systems.observer import OBSERVATION_SIZE
+from rlfd_drake.systems.observer import OBSERVATION_SIZE, OBSERVATION_WRIST_TORQUE
 from rlfd_drake.train import TrainConfig, make_model
 
 
@@ -39,6 +39,32 @@ def test_the_contact_features_reach_order_one():
     assert scales[17] * 80.0 / 50.0 == pytest.approx(4.0)
 
 
+def test_a_small_part_gets_its_torque_scale_and_nothing_else_changes():
+    scales = np.asarray(contact_scales(0.05))
+    default = np.asarray(CONTACT_SCALES)
+    torque = np.zeros(OBSERVATION_SIZE, bool)
+    torque[OBSERVATION_WRIST_TORQUE] = True
+    # The RJ-45 plug resting 2 mm off centre with 25 N: 0.05 N m, i.e. 0.01 in the
+    # Observer's 5 N m units, one unit inside the network.
+    assert scales[13] * 0.05 / 5.0 == pytest.approx(1.0)
+    np.testing.assert_allclose(scales[torque], default[torque] * 20.0)
+    np.testing.assert_array_equal(scales[~torque], default[~torque])
+    assert contact_scales() == CONTACT_SCALES
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])
+def test_bad_torque_scales_are_named(value):
+    with pytest.raises(ValueError, match="torque_per_unit_nm"):
+        contact_scales(value)
+    with pytest.raises(ValueError, match="contact_torque_nm"):
+        TrainConfig(scaled_observation=True, contact_torque_nm=value)
+
+
+def test_a_torque_scale_needs_the_scaled_observation():
+    with pytest.raises(ValueError, match="contact_torque_nm=0.05 needs scaled_observation"):
+        TrainConfig(contact_torque_nm=0.05)
+
+
 @pytest.mark.parametrize(
     "space, scales, match",
     [
@@ -56,7 +82,12 @@ def test_bad_spaces_and_scales_are_named(space, scales, match):
 def test_scaled_sac_trains_saves_and_deploys_with_the_same_actions(tmp_path):
     fast = RlfdDiagramConfig(residual_activation_s=0.3)
     config = TrainConfig(
-        algo="sac", envs=1, history=2, sac_learning_starts=4, scaled_observation=True
+        algo="sac",
+        envs=1,
+        history=2,
+        sac_learning_starts=4,
+        scaled_observation=True,
+        contact_torque_nm=0.05,
     )
     venv = VecFrameStack(DummyVecEnv([lambda: RlfdEnv("peg_easy", diagram_config=fast)]), n_stack=2)
     model = make_model(config, venv, None)
@@ -66,6 +97,12 @@ def test_scaled_sac_trains_saves_and_deploys_with_the_same_actions(tmp_path):
     model.save(tmp_path / "scaled.zip")
     loaded, _ = load_sb3_model(f"sac:{tmp_path / 'scaled.zip'}")
     assert isinstance(loaded.policy.actor.features_extractor, ScaledObservation)
+    expected = torch.tensor(contact_scales(0.05)).repeat(2)
+    for extractor in (
+        loaded.policy.actor.features_extractor,
+        model.policy.critic.features_extractor,
+    ):
+        torch.testing.assert_close(extractor.scales, expected)
     obs = np.random.default_rng(1).normal(size=(4, 2 * OBSERVATION_SIZE)).astype(np.float32)
     np.testing.assert_array_equal(
         model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0]
