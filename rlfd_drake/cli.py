@@ -324,6 +324,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         composition=args.composition,
         init_from=args.init_from,
         force_limit_n=args.force_limit_n,
+        force_limit_penalty=args.force_limit_penalty,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         # The default stays TrainConfig's (importing it here would load torch).
@@ -562,6 +563,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="end training episodes whose low-passed contact force exceeds this, N (a "
         "collision reflex; default: the task's own limit)",
+    )
+    train.add_argument(
+        "--force-limit-penalty",
+        type=float,
+        default=0.0,
+        help="subtract this from the reward of a training step that breaks the force "
+        "limit (default 0: the paper's sparse reward, a broken part scores as a timeout)",
     )
     train.add_argument(
         "--scaled-observation",

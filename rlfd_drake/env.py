@@ -120,7 +120,9 @@ class RlfdEnv(DrakeGymEnv):
 
     ## Episode End
     Terminated on success (part within kappa) or when the task's force limit is broken
-    (failure, ``info["force_limit_broken"]``); truncated at the episode time (10 s) or
+    (failure, ``info["force_limit_broken"]``; the step's reward is then
+    ``-force_limit_penalty``, 0 by default as in the paper's sparse reward, which cannot
+    tell a broken part from a timeout); truncated at the episode time (10 s) or
     when the contact solver fails (``info["failure_reason"]`` says why).
 
     ## Arguments
@@ -129,8 +131,10 @@ class RlfdEnv(DrakeGymEnv):
     ``composition`` ("residual": rLfD; "hybrid" or "pure": the action is a velocity
     command that moves the set-point, from the DMP's pose at the activation time or
     from the start with no DMP: the paper's Table III baselines; "pure" acts for the
-    whole 10 s), ``diagram_config`` (RlfdDiagramConfig), ``render_mode`` (None | "ansi" | "human":
-    Meshcat), ``info_handler`` (callable(simulator) -> dict merged into ``info``).
+    whole 10 s), ``force_limit_penalty`` (>= 0: subtracted from the reward of the step
+    that breaks the force limit), ``diagram_config`` (RlfdDiagramConfig),
+    ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
+    (callable(simulator) -> dict merged into ``info``).
     """
 
     metadata = {"render_modes": ["ansi", "human"], "render_fps": 10}
@@ -145,12 +149,14 @@ class RlfdEnv(DrakeGymEnv):
         render_mode: str | None = None,
         info_handler=None,
         composition: str = "residual",
+        force_limit_penalty: float = 0.0,
     ) -> None:
         self._init_args = dict(
             task=task,
             reward=reward,
             residual_mode=residual_mode,
             composition=composition,
+            force_limit_penalty=force_limit_penalty,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -163,7 +169,12 @@ class RlfdEnv(DrakeGymEnv):
             raise ValueError(f"render_mode must be None, 'ansi' or 'human', got {render_mode!r}")
         if info_handler is not None and not callable(info_handler):
             raise ValueError("info_handler must be callable(simulator) -> dict")
+        if not (np.isfinite(force_limit_penalty) and force_limit_penalty >= 0):
+            raise ValueError(
+                f"force_limit_penalty must be a number >= 0, got {force_limit_penalty}"
+            )
         self.reward_kind = reward
+        self.force_limit_penalty = float(force_limit_penalty)
         self.set_perturbation_scale(perturbation_scale)
         config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
         if residual_mode not in ("full", "translation", "orientation"):
@@ -333,6 +344,8 @@ class RlfdEnv(DrakeGymEnv):
         limit = self.task.force_limit_n
         # Force limits apply to the low-passed contact force (see ObserverConfig).
         if limit is not None and self._port("force_metrics")[3] > limit:
+            if not self._force_limit_broken:
+                reward -= self.force_limit_penalty
             self._force_limit_broken = True
         terminated = success or self._force_limit_broken
         truncated = (not terminated) and context.get_time() >= self.task.episode_time_s - 1e-9

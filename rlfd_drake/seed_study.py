@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ import numpy as np
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
 from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.train import TrainConfig
 
 __all__ = ["ACTIONS", "SeedRun", "format_spread", "load_seed_run", "seed_study", "study_name"]
 
@@ -74,16 +75,18 @@ def _check_one_recipe(runs: list[SeedRun]) -> None:
     seeds = [run.seed for run in runs]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"runs: each seed once, got seeds {seeds}")
+    # A run saved before a setting existed trained with its default.
+    defaults = {field.name: field.default for field in fields(TrainConfig)}
     first = runs[0]
     for run in runs[1:]:
         for key in sorted(set(first.config) | set(run.config)):
             if key == "seed":
                 continue
-            if first.config.get(key) != run.config.get(key):
+            mine, theirs = (r.config.get(key, defaults.get(key)) for r in (first, run))
+            if mine != theirs:
                 raise ValueError(
                     f"runs {str(first.folder)!r} and {str(run.folder)!r} differ in {key}: "
-                    f"{first.config.get(key)!r} vs {run.config.get(key)!r} (a seed study "
-                    "compares seeds of one recipe)"
+                    f"{mine!r} vs {theirs!r} (a seed study compares seeds of one recipe)"
                 )
 
 

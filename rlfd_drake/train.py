@@ -92,6 +92,8 @@ class TrainConfig:
             baselines; see ``diagram.COMPOSITIONS``).
         init_from: a saved policy (.zip) of the same algorithm whose networks start
             this run (transfer, Table VI); None = a new zero-output policy.
+        force_limit_penalty: subtracted from the reward of a training step that breaks
+            the force limit (``RlfdEnv``); 0 = the paper's sparse reward.
         scaled_observation: start the networks with a fixed input layer that brings
             the contact features to order one (``observation_scaling.CONTACT_SCALES``).
         contact_torque_nm: with ``scaled_observation``, the wrist torque that the
@@ -131,6 +133,7 @@ class TrainConfig:
     composition: str = "residual"
     init_from: str | None = None
     force_limit_n: float | None = None
+    force_limit_penalty: float = 0.0
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
@@ -186,6 +189,10 @@ class TrainConfig:
             raise ValueError(
                 f"contact_torque_nm={self.contact_torque_nm} needs scaled_observation=True"
             )
+        if not (np.isfinite(self.force_limit_penalty) and self.force_limit_penalty >= 0):
+            raise ValueError(
+                f"force_limit_penalty must be a number >= 0, got {self.force_limit_penalty}"
+            )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
 
@@ -199,6 +206,7 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "reward": config.reward,
         "residual_mode": config.residual_mode,
         "composition": config.composition,
+        "force_limit_penalty": config.force_limit_penalty,
     }
 
 

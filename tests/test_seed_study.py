@@ -92,8 +92,15 @@ def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, mon
     monkeypatch.chdir(tmp_path)
     a = _run_folder(tmp_path, 0)
     b = _run_folder(tmp_path, 1, sac_gradient_steps=8)
-    with pytest.raises(ValueError, match="differ in sac_gradient_steps: None vs 8"):
+    with pytest.raises(ValueError, match="differ in sac_gradient_steps: 1 vs 8"):
         seed_study([a, b], ["peg_easy"])
+    # A setting the older run's config predates counts at its default.
+    c = _run_folder(tmp_path, 2, force_limit_penalty=0.0)
+    with pytest.raises(ValueError, match="no policy.zip to evaluate"):  # past the check
+        seed_study([a, c], ["peg_easy"])
+    d = _run_folder(tmp_path, 3, force_limit_penalty=1.0)
+    with pytest.raises(ValueError, match="differ in force_limit_penalty: 0.0 vs 1.0"):
+        seed_study([a, d], ["peg_easy"])
     with pytest.raises(ValueError, match="each seed once"):
         seed_study([a, a], ["peg_easy"])
     with pytest.raises(ValueError, match="targets: task 'peg_hard' is not evaluated"):

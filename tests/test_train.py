@@ -197,15 +197,22 @@ def test_bad_config_names_the_field():
         TrainConfig(sac_gradient_steps=0)
     with pytest.raises(ValueError, match="sac_initial_ent_coef must be a positive number"):
         TrainConfig(sac_initial_ent_coef=0.0)
+    with pytest.raises(ValueError, match="force_limit_penalty must be a number >= 0, got -1"):
+        TrainConfig(force_limit_penalty=-1.0)
+    with pytest.raises(ValueError, match="force_limit_penalty must be a number >= 0, got nan"):
+        RlfdEnv("peg_easy", force_limit_penalty=float("nan"))
 
 
-def test_training_force_limit_ends_episodes_that_push_harder():
+@pytest.mark.parametrize("penalty", [0.0, 0.5])
+def test_training_force_limit_ends_episodes_that_push_harder(penalty):
     """A training-only force limit reaches the envs and ends an episode as a failure
     once the low-passed contact force exceeds it (the DMP alone from the demo start,
-    with the hole 2 mm off, lands on the chamfer with more than 1 N)."""
+    with the hole 2 mm off, lands on the chamfer with more than 1 N); that step's
+    reward is minus the penalty."""
     from rlfd_drake.train import _env_kwargs
 
-    kwargs = _env_kwargs(TrainConfig(task="peg_easy", force_limit_n=1.0))
+    config = TrainConfig(task="peg_easy", force_limit_n=1.0, force_limit_penalty=penalty)
+    kwargs = _env_kwargs(config)
     assert kwargs["task"].name == "peg_easy" and kwargs["task"].force_limit_n == 1.0
     assert _env_kwargs(TrainConfig(task="peg_easy"))["task"] == "peg_easy"
     env = RlfdEnv(**kwargs)
@@ -216,7 +223,7 @@ def test_training_force_limit_ends_episodes_that_push_harder():
         if terminated or truncated:
             break
     assert terminated and info["force_limit_broken"] and not info["success"]
-    assert reward == 0.0
+    assert reward == -penalty
 
 
 def test_deployed_policy_matches_the_frame_stacked_training_view():
