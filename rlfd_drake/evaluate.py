@@ -42,6 +42,7 @@ from rlfd_drake.episode import (
 )
 from rlfd_drake.policies import (
     DeployedPolicy,
+    check_noise_scale,
     check_residual_mode,
     load_sb3_model,
     policy_file,
@@ -96,6 +97,7 @@ def make_policy(
     deterministic: bool = True,
     task: TaskSpec | None = None,
     dmp=None,
+    noise_scale: float = 1.0,
 ):
     """The residual policy of ``policy_spec`` for one episode (None for "dmp").
 
@@ -103,6 +105,7 @@ def make_policy(
     process and shared (its recurrent state is reset at every episode start). A
     baseline ``.npz`` is allowed here only as a part of a split spec (whole, it may
     replace the DMP: see ``_init_worker``); ``task`` and ``dmp`` are then needed.
+    ``noise_scale`` scales a saved model's sampling noise (see DeployedPolicy).
     """
     if "|" in policy_spec:
         from rlfd_drake.baselines.split import SplitResidualPolicy
@@ -111,8 +114,12 @@ def make_policy(
         if len(parts) != 2:
             raise ValueError(f"a split policy is 'translation|orientation', got {policy_spec!r}")
         return SplitResidualPolicy(
-            make_policy(parts[0], "translation", episode_seed, deterministic, task, dmp),
-            make_policy(parts[1], "orientation", episode_seed + 1, deterministic, task, dmp),
+            make_policy(
+                parts[0], "translation", episode_seed, deterministic, task, dmp, noise_scale
+            ),
+            make_policy(
+                parts[1], "orientation", episode_seed + 1, deterministic, task, dmp, noise_scale
+            ),
         )
     if policy_spec == "dmp":
         return None
@@ -149,7 +156,13 @@ def make_policy(
             pass
         _MODEL_CACHE[policy_spec] = load_sb3_model(policy_spec)
     model, kind = _MODEL_CACHE[policy_spec]
-    return DeployedPolicy(model, residual_mode, deterministic=deterministic, seed=episode_seed)
+    return DeployedPolicy(
+        model,
+        residual_mode,
+        deterministic=deterministic,
+        seed=episode_seed,
+        noise_scale=noise_scale,
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -164,6 +177,7 @@ def _init_worker(
     residual_mode: str,
     config: RlfdDiagramConfig,
     deterministic: bool = True,
+    noise_scale: float = 1.0,
 ) -> None:
     task = load_task(task_name)
     _WORKER.update(
@@ -173,6 +187,7 @@ def _init_worker(
         residual_mode=residual_mode,
         config=config,
         deterministic=deterministic,
+        noise_scale=noise_scale,
         kit=None,
     )
     if policy_spec.endswith(".npz") and "|" not in policy_spec:
@@ -183,7 +198,14 @@ def _init_worker(
         _WORKER["kit"] = load_baseline(policy_spec, task, _WORKER["dmp"])
     elif policy_spec not in NAMED_POLICIES:
         # Load the models once, fail early.
-        make_policy(policy_spec, residual_mode, task=task, dmp=_WORKER["dmp"])
+        make_policy(
+            policy_spec,
+            residual_mode,
+            deterministic=deterministic,
+            task=task,
+            dmp=_WORKER["dmp"],
+            noise_scale=noise_scale,
+        )
 
 
 def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
@@ -206,6 +228,7 @@ def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
         _WORKER["deterministic"],
         _WORKER["task"],
         _WORKER["dmp"],
+        _WORKER["noise_scale"],
     )
     result = run_episode(
         _WORKER["task"], _WORKER["dmp"], spec, policy=policy, diagram_config=_WORKER["config"]
@@ -343,6 +366,7 @@ def evaluate(
     progress: bool = True,
     deterministic: bool = True,
     composition: str = "residual",
+    noise_scale: float = 1.0,
 ) -> dict:
     """Evaluates a policy on ``episodes`` starts of a task.
 
@@ -362,6 +386,8 @@ def evaluate(
         composition: how the action sets the set-point (``diagram.COMPOSITIONS``:
             "residual" for rLfD, "hybrid" / "pure" for policies trained that way);
             replaces ``diagram_config``'s.
+        noise_scale: with ``deterministic=False``, the factor on the policy's standard
+            deviation (1: as trained; see DeployedPolicy).
 
     Returns:
         A JSON-serialisable dict with :data:`RESULT_KEYS`: ``success_rate`` (0..1),
@@ -383,12 +409,21 @@ def evaluate(
         raise ValueError(f"episodes must be positive, got {episodes}")
     if workers <= 0:
         raise ValueError(f"workers must be positive, got {workers}")
+    check_noise_scale(noise_scale)
+    if deterministic and noise_scale != 1.0:
+        raise ValueError(f"noise_scale {noise_scale} needs sampled actions (deterministic=False)")
     task = load_task(task_name)
     parts = policy_spec.split("|")
     part_modes = [residual_mode] if len(parts) == 1 else ["translation", "orientation"]
     for part, mode in zip(parts, part_modes, strict=False):
         if part.endswith(".zip"):
             check_residual_mode(policy_file(part), mode)
+    if noise_scale != 1.0:
+        saved = [part for part in parts if part.endswith(".zip")]
+        if not saved:
+            raise ValueError(f"noise_scale {noise_scale} needs a saved policy, got {policy_spec!r}")
+        for part in saved:  # here, not in a worker: a worker's error would respawn it
+            DeployedPolicy(load_sb3_model(part)[0], deterministic=False, noise_scale=noise_scale)
     config = replace(
         diagram_config if diagram_config is not None else RlfdDiagramConfig(),
         residual_mode=residual_mode,
@@ -397,7 +432,7 @@ def evaluate(
     specs = make_episode_specs(task, episodes, seed, grid)
     episode_seeds = np.random.SeedSequence([seed, 1]).generate_state(episodes).tolist()
     jobs = [(i, int(episode_seeds[i]), spec) for i, spec in enumerate(specs)]
-    init_args = (task_name, policy_spec, residual_mode, config, deterministic)
+    init_args = (task_name, policy_spec, residual_mode, config, deterministic, noise_scale)
 
     from tqdm.auto import tqdm
 
@@ -434,6 +469,7 @@ def evaluate(
         "composition": composition,
         "residual_bounds": list(config.residual_bounds(task)),
         "deterministic": deterministic,
+        "noise_scale": None if deterministic else noise_scale,
         "seed": seed,
         "grid": grid,
         "episodes": episodes,
@@ -572,12 +608,19 @@ def trained_mode(policy_spec: str) -> str:
 
 
 def evaluation_name(
-    task: str, policy_spec: str, residual_mode: str, stochastic: bool, seed: int
+    task: str,
+    policy_spec: str,
+    residual_mode: str,
+    stochastic: bool,
+    seed: int,
+    noise_scale: float = 1.0,
 ) -> str:
     """The results file stem ``rlfd evaluate`` gives an evaluation, e.g.
-    ``eval_peg_hard_<run folder>_translation_stochastic_s0``."""
+    ``eval_peg_hard_<run folder>_translation_stochastic_s0`` (``..._stochastic0.5_s0``
+    with half the policy's noise)."""
     mode = "" if residual_mode == "full" else f"_{residual_mode}"
-    mode += "_stochastic" if stochastic else ""
+    if stochastic:
+        mode += "_stochastic" + ("" if noise_scale == 1.0 else f"{noise_scale:g}")
     return f"eval_{task}_{policy_stem(policy_spec)}{mode}_s{seed}"
 
 

@@ -191,7 +191,12 @@ class DeployedPolicy:
       padded with zeros according to ``residual_mode``.
     * ``reset()`` (called by ResidualPolicy at every initialisation) starts an episode.
     * ``deterministic=False`` samples from the policy's distribution; ``reset()`` then
-      seeds torch with ``seed`` so the episode is reproducible.
+      seeds torch with ``seed`` so the episode is reproducible. ``noise_scale``
+      multiplies the distribution's standard deviation when sampling (1: the trained
+      distribution, as SB3 samples it; 0 < s < 1: between the mean action and the
+      trained exploration, a temperature for the success-against-force trade-off).
+      Scales other than 1 are for SAC (the Gaussian before its tanh) and PPO (the
+      Gaussian, clipped to the action space as SB3 clips it).
     """
 
     def __init__(
@@ -201,7 +206,9 @@ class DeployedPolicy:
         deterministic: bool = True,
         observation_size: int = 26,
         seed: int = 0,
+        noise_scale: float = 1.0,
     ):
+        check_noise_scale(noise_scale)
         stacked = int(model.observation_space.shape[0])
         if stacked % observation_size:
             raise ValueError(
@@ -215,6 +222,18 @@ class DeployedPolicy:
         self.deterministic = deterministic
         self.seed = int(seed)
         self._recurrent = hasattr(model.policy, "lstm_actor")
+        self.noise_scale = float(noise_scale)
+        self._scaled_sampling = not deterministic and self.noise_scale != 1.0
+        sac_actor = getattr(model.policy, "actor", None)
+        gaussian = (hasattr(sac_actor, "get_action_dist_params") and not sac_actor.use_sde) or (
+            hasattr(model.policy, "get_distribution") and not model.policy.use_sde
+        )
+        if self._scaled_sampling and (self._recurrent or not gaussian):
+            raise ValueError(
+                f"noise_scale {noise_scale} needs a SAC or PPO policy; "
+                f"{type(model).__name__} (or state-dependent noise) samples only at its "
+                "trained scale"
+            )
         self.reset()
 
     def reset(self) -> None:
@@ -241,9 +260,38 @@ class DeployedPolicy:
                 deterministic=self.deterministic,
             )
             self._episode_start = np.zeros((1,), dtype=bool)
+        elif self._scaled_sampling:
+            action = self._sample_scaled(self._stack)
         else:
             action, _ = self.model.predict(self._stack, deterministic=self.deterministic)
         action = np.asarray(action, dtype=float).reshape(-1)
         if action.size == 3 and self.residual_mode in RESIDUAL_PARTS:
             return pad_residual_part(action, self.residual_mode)
         return action
+
+    def _sample_scaled(self, stacked_observation: np.ndarray) -> np.ndarray:
+        """One action sampled with the policy's standard deviation times noise_scale,
+        mapped to the action space as SB3's ``predict`` maps its samples."""
+        import torch
+
+        policy = self.model.policy
+        obs, _ = policy.obs_to_tensor(stacked_observation)
+        with torch.no_grad():
+            if hasattr(policy, "actor"):  # SAC: a Gaussian squashed by tanh
+                mean, log_std, _ = policy.actor.get_action_dist_params(obs)
+                noise = torch.randn(mean.shape, dtype=mean.dtype)
+                action = torch.tanh(mean + self.noise_scale * log_std.exp() * noise)
+            else:  # PPO: a Gaussian, clipped below
+                gaussian = policy.get_distribution(obs).distribution
+                noise = torch.randn(gaussian.mean.shape, dtype=gaussian.mean.dtype)
+                action = gaussian.mean + self.noise_scale * gaussian.stddev * noise
+        action = action.numpy().reshape(self.model.action_space.shape)
+        if policy.squash_output:
+            return policy.unscale_action(action)
+        return np.clip(action, self.model.action_space.low, self.model.action_space.high)
+
+
+def check_noise_scale(noise_scale: float) -> None:
+    """Raises a ValueError unless ``noise_scale`` is a finite number > 0."""
+    if not (isinstance(noise_scale, int | float) and np.isfinite(noise_scale) and noise_scale > 0):
+        raise ValueError(f"noise_scale must be a number > 0, got {noise_scale!r}")

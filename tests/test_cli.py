@@ -53,6 +53,19 @@ def test_evaluation_file_names_of_policy_specs():
     assert policy_stem("sac:runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
     assert policy_stem("models/policies/peg_easy_sac.zip") == "peg_easy_sac"
     assert policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
+    from rlfd_drake.evaluate import evaluation_name
+
+    stem = "runs/peg_sac_s0/policy.zip"
+    assert evaluation_name("peg", stem, "full", True, 0) == "eval_peg_peg_sac_s0_stochastic_s0"
+    assert (
+        evaluation_name("peg", stem, "full", True, 0, noise_scale=0.5)
+        == "eval_peg_peg_sac_s0_stochastic0.5_s0"
+    )
+
+
+def test_noise_scale_needs_stochastic(capsys):
+    assert main(["evaluate", "--policy", "dmp", "--noise-scale", "0.5", "--episodes", "1"]) == 2
+    assert "--noise-scale 0.5 needs --stochastic" in capsys.readouterr().err
 
 
 def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, capsys):

@@ -186,6 +186,61 @@ def test_saved_sb3_models_become_residual_policies(module, name, kind, tmp_path)
     np.testing.assert_allclose(policy(obs), first)  # deterministic after a reset
 
 
+@pytest.mark.parametrize("name", ["SAC", "PPO"])
+def test_noise_scale_scales_the_sampling_spread(name):
+    """--noise-scale s samples with s times the policy's standard deviation: a small s
+    gives the mean action, 0.5 half the spread of the trained distribution."""
+    import stable_baselines3
+
+    model = getattr(stable_baselines3, name)("MlpPolicy", _ResidualEnv(), device="cpu", seed=0)
+    if name == "PPO":
+        model.policy.log_std.data.fill_(np.log(0.2))
+    obs = np.linspace(-0.5, 0.5, OBSERVATION_SIZE).astype(np.float32)
+    mean_action = DeployedPolicy(model)(obs)
+
+    def samples(scale: float) -> np.ndarray:
+        actions = []
+        for seed in range(300):
+            policy = DeployedPolicy(model, deterministic=False, seed=seed, noise_scale=scale)
+            actions.append(policy(obs))
+        return np.array(actions)
+
+    np.testing.assert_allclose(samples(1e-6)[:5], [mean_action] * 5, atol=1e-5)
+
+    # Spread of the Gaussian: SAC's tanh is inverted; PPO's clip to [-1, 1] is rare
+    # at the std of 0.2 set here.
+    def spread(actions: np.ndarray) -> np.ndarray:
+        if name == "SAC":
+            actions = np.arctanh(np.clip(actions, -0.999999, 0.999999))
+        return actions.std(axis=0)
+
+    half, full = spread(samples(0.5)), spread(samples(1.0))
+    np.testing.assert_allclose(half / full, 0.5, rtol=0.15)
+    # Reproducible per episode seed.
+    again = DeployedPolicy(model, deterministic=False, seed=4, noise_scale=0.5)
+    np.testing.assert_array_equal(again(obs), samples(0.5)[4])
+
+
+def test_noise_scale_is_validated(tmp_path):
+    from stable_baselines3 import SAC, TD3
+
+    sac = SAC("MlpPolicy", _ResidualEnv(), device="cpu", seed=0)
+    for bad in (0.0, -1.0, float("nan"), "half"):
+        with pytest.raises(ValueError, match="noise_scale"):
+            DeployedPolicy(sac, deterministic=False, noise_scale=bad)
+    td3 = TD3("MlpPolicy", _ResidualEnv(), device="cpu", seed=0)
+    with pytest.raises(ValueError, match="noise_scale 0.5 needs a SAC or PPO policy"):
+        DeployedPolicy(td3, deterministic=False, noise_scale=0.5)
+    with pytest.raises(ValueError, match="needs sampled actions"):
+        evaluate("peg_easy", "dmp", episodes=1, seed=0, workers=1, noise_scale=0.5)
+    with pytest.raises(ValueError, match="needs a saved policy"):
+        evaluate("peg_easy", "random", 1, 0, workers=1, deterministic=False, noise_scale=0.5)
+    path = tmp_path / "td3.zip"
+    td3.save(path)
+    with pytest.raises(ValueError, match="SAC or PPO"):  # before any worker starts
+        evaluate("peg_easy", str(path), 1, 0, workers=2, deterministic=False, noise_scale=0.5)
+
+
 def test_split_spec_takes_translation_and_orientation_from_different_policies():
     """Table IV's "translation / orientation" rows, e.g. Linear / Random."""
     from rlfd_drake.baselines.split import SplitResidualPolicy
