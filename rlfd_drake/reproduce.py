@@ -13,12 +13,13 @@ writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the paper's
 numbers and ours.
 
 Tables: 1, 2, 3 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
-insertion times), 6 (transfer between gear and RJ-45) and ``forces`` (peak contact
-forces of Tables I and II's rows); 5 and ``forces`` reuse the other tables'
-evaluations. Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC,
-Table VI's transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS``
-for the folders and the commands); a missing one is listed as "not run" with the
-command that trains it, since each takes 5-45 minutes on 2 cores.
+insertion times), 6 (transfer between gear and RJ-45), ``forces`` (peak contact
+forces of Tables I and II's rows) and ``forces_full_pose`` (Table IV's rows); 5 and the
+force tables reuse the other tables' evaluations. Rows of deep-RL policies (rLfD per
+task, Table III's pure and hybrid SAC, Table VI's transfer runs) evaluate a policy
+trained by ``rlfd train`` (see ``RUNS`` for the folders and the commands); a missing
+one is listed as "not run" with the command that trains it, since each takes 5-45
+minutes on 2 cores.
 
 Budgets: ``quick`` trains each episodic baseline for 100 episodes and evaluates 40
 starts per task (about an hour on 2 cores for tables 1, 2 and 4); ``paper`` uses 500
@@ -67,6 +68,8 @@ class Row:
         residual_mode: composer mode of the evaluation (and of the linear baseline).
         train_task: task the baseline is trained on; None = each column's own task.
         stochastic: a trained policy samples its actions (seeded) instead of its mean.
+        noise_scale: with ``stochastic``, the factor on the policy's standard deviation
+            (1: as trained; see ``rlfd evaluate --noise-scale``).
         composition: how the policy sets the set-point ("residual" = rLfD; "hybrid",
             "pure": Table III's baselines).
         orientation_source: if given ("random"), the orientation part of the residual
@@ -82,6 +85,7 @@ class Row:
     stochastic: bool = False
     composition: str = "residual"
     orientation_source: str | None = None
+    noise_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -337,6 +341,13 @@ TABLES: dict[str, Table] = {
                 "run:rlfd_gs4",
                 _PAPER_FULL_POSE_RLFD,
             ),
+            Row(
+                "SAC / SAC (rLfD), 4 updates per step, sampled at half its noise",
+                "run:rlfd_gs4",
+                _PAPER_FULL_POSE_RLFD,
+                stochastic=True,
+                noise_scale=0.5,
+            ),
             Row("Force-guided search / None (hand-written reference)", "force_search", {}),
         ],
         "Linear is trained on each column's task (Linear / Random: on translation, with "
@@ -420,6 +431,14 @@ TABLES["forces"] = Table(
     "The paper reports forces qualitatively: rLfD feels forces comparable to the DMP's.",
     metric="peak_force",
 )
+TABLES["forces_full_pose"] = Table(
+    "Contact forces of the full-pose policies (Table IV's rows): peak total contact "
+    "force (N), mean over episodes",
+    _PHYSICAL,
+    [replace(row, paper={}) for row in TABLES["4"].rows],
+    "The paper reports forces qualitatively: rLfD feels forces comparable to the DMP's.",
+    metric="peak_force",
+)
 
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.
@@ -477,6 +496,7 @@ def stored_or_new_evaluation(
     composition: str = "residual",
     required: tuple[str, ...] = (),
     available: bool = True,
+    noise_scale: float = 1.0,
 ) -> dict | None:
     """The evaluation of ``policy`` on ``task``, reusing a stored one of the same size,
     seed, composition and residual bounds that has the ``required`` keys (figures
@@ -510,6 +530,7 @@ def stored_or_new_evaluation(
         progress=False,
         deterministic=not stochastic,
         composition=composition,
+        noise_scale=noise_scale,
     )
     write_evaluation(result, name)
     return result
@@ -563,7 +584,8 @@ def _cell(
         policy = f"{policy}|{row.orientation_source}"
         mode += f"_{row.orientation_source}_orientation"
         eval_mode = "full"
-    mode += "_stochastic" if row.stochastic else ""
+    if row.stochastic:
+        mode += "_stochastic" + ("" if row.noise_scale == 1.0 else f"{row.noise_scale:g}")
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
 
     def evaluation(available: bool) -> dict | None:
@@ -579,6 +601,7 @@ def _cell(
             row.composition,
             required=_METRIC_KEYS.get(metric, ()),
             available=available,
+            noise_scale=row.noise_scale,
         )
 
     # A stored evaluation is reused even where the policy is not on this machine.

@@ -22,6 +22,7 @@ def _fake_evaluation(
     composition="residual",
     required=(),
     available=True,
+    noise_scale=1.0,
 ):
     if not available:
         return None
@@ -285,3 +286,33 @@ def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch, table, colu
     row = next(r for r in data["rows"] if r["label"].startswith("Force-guided search"))
     assert all(row["ours"][column]["success_pct"] == pytest.approx(70.0) for column in columns)
     assert "not in the paper" in (tmp_path / "results" / f"table_{table}.md").read_text()
+
+
+def test_half_noise_row_and_full_pose_forces(tmp_path, monkeypatch):
+    """Table IV's half-noise row asks for sampled actions at noise scale 0.5 under its
+    own file name; the full-pose force table takes Table IV's rows with their forces."""
+    monkeypatch.chdir(tmp_path)
+    asked = {}
+
+    def recording_evaluation(task, policy, name, *args, **kwargs):
+        asked[name] = (args[4] if len(args) > 4 else kwargs.get("stochastic"), kwargs)
+        return _fake_evaluation(task, policy, name, *args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    (tmp_path / "results").mkdir()
+    for task in ("peg", "gear", "rj45"):  # stored training logs of the gs4 runs
+        folder = tmp_path / "results" / f"train_{task}_sac_gs4_s0"
+        folder.mkdir()
+        (folder / "metrics.json").write_text('{"episodes": 300}')
+    data = reproduce.reproduce_table("forces_full_pose", budget="quick", seed=0, workers=1)
+    half = "eval_gear_gear_sac_gs4_s0_stochastic0.5_n40_s0"
+    stochastic, options = asked[half]
+    assert stochastic is True and options["noise_scale"] == 0.5
+    assert asked["eval_gear_gear_sac_gs4_s0_stochastic_n40_s0"][1]["noise_scale"] == 1.0
+    labels = [row["label"] for row in data["rows"]]
+    assert labels == [row.label for row in reproduce.TABLES["4"].rows]
+    markdown = (tmp_path / "results" / "table_forces_full_pose.md").read_text()
+    assert "| None / None | n/a | 40 (30 / -); LP 20; 2.5 N m |" in markdown
