@@ -505,6 +505,7 @@ def stored_or_new_evaluation(
     from rlfd_drake.evaluate import evaluate, result_from_json, write_evaluation
 
     path = results_dir() / f"{name}.json"
+    stored = None
     if path.exists():
         stored = result_from_json(path)
         same = (
@@ -513,12 +514,15 @@ def stored_or_new_evaluation(
             and stored.get("composition", "residual") == composition
             # Evaluations from before the bounds were stored used 1 cm / 0.087 rad.
             and stored.get("residual_bounds", list(_DEFAULT_BOUNDS)) == _bounds(task)
-            and all(key in stored for key in required)
         )
-        if same:
+        if not same:
+            stored = None
+        elif all(key in stored for key in required):
             return stored
     if not available:
-        return None
+        # A stored evaluation that predates some figures still has the others (shown
+        # as "n/a" where missing) when the policy is not here to evaluate again.
+        return stored
     print(f"  evaluating {name} ({episodes} episodes)", flush=True)
     result = evaluate(
         task,
@@ -657,9 +661,17 @@ def _format_metric(cell: dict, metric: str) -> str:
     by_outcome = cell["peak_force_by_outcome_n"]
     parts = [by_outcome.get(k) for k in ("success", "failure")]
     split = " / ".join("-" if v is None else f"{v:.0f}" for v in parts)
-    low_passed = cell["peak_low_passed_force_n"]
-    torque = cell["peak_joint_contact_torque_nm"]
-    return f"{cell['peak_force_n']:.0f} ({split}); LP {low_passed:.0f}; {torque:.1f} N m"
+    # Evaluations stored before a figure existed show it as n/a (see _METRIC_KEYS).
+    low_passed = _fmt_or_na(cell["peak_low_passed_force_n"], ".0f")
+    torque = _fmt_or_na(cell["peak_joint_contact_torque_nm"], ".1f", " N m")
+    text = f"{cell['peak_force_n']:.0f}"
+    if by_outcome:
+        text += f" ({split})"
+    return f"{text}; LP {low_passed}; {torque}"
+
+
+def _fmt_or_na(value: float | None, spec: str, unit: str = "") -> str:
+    return "n/a" if value is None else f"{value:{spec}}{unit}"
 
 
 def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed: int) -> str:

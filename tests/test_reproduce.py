@@ -316,3 +316,29 @@ def test_half_noise_row_and_full_pose_forces(tmp_path, monkeypatch):
     assert labels == [row.label for row in reproduce.TABLES["4"].rows]
     markdown = (tmp_path / "results" / "table_forces_full_pose.md").read_text()
     assert "| None / None | n/a | 40 (30 / -); LP 20; 2.5 N m |" in markdown
+
+
+def test_a_stored_evaluation_missing_new_figures_is_kept_when_its_policy_is_gone(
+    tmp_path, monkeypatch
+):
+    """Run folders stay on the machine that trained them: an older stored evaluation
+    without the low-passed force still gives its other figures (n/a for the new ones)
+    instead of a "not run" cell; with the policy here it is evaluated again."""
+    from rlfd_drake.results import write_result
+
+    monkeypatch.chdir(tmp_path)
+    old = {"episodes": 40, "seed": 0, "success_rate": 0.5, "peak_force_n": 120.0}
+    write_result("eval_gear_old_n40_s0", old, seed=0)
+    required = reproduce._METRIC_KEYS["peak_force"]
+    args = ("gear", "runs/old/policy.zip", "eval_gear_old_n40_s0", "full", 40, 0, 1)
+    kept = reproduce.stored_or_new_evaluation(*args, required=required, available=False)
+    assert kept["peak_force_n"] == 120.0 and "peak_low_passed_force_n" not in kept
+    other_seed = ("gear", "runs/old/policy.zip", "eval_gear_old_n40_s0", "full", 40, 1, 1)
+    assert reproduce.stored_or_new_evaluation(*other_seed, available=False) is None
+    cell = {
+        "peak_force_n": 120.0,
+        "peak_force_by_outcome_n": {},
+        "peak_low_passed_force_n": None,
+        "peak_joint_contact_torque_nm": None,
+    }
+    assert reproduce._format_metric(cell, "peak_force") == "120; LP n/a; n/a"
