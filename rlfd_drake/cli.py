@@ -325,6 +325,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         init_from=args.init_from,
         force_limit_n=args.force_limit_n,
         force_limit_penalty=args.force_limit_penalty,
+        peak_force_cost=args.peak_force_cost,
+        peak_force_threshold_n=args.peak_force_threshold_n,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         # The default stays TrainConfig's (importing it here would load torch).
@@ -574,6 +576,19 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="subtract this from the reward of a training step that breaks the force "
         "limit (default 0: the paper's sparse reward, a broken part scores as a timeout)",
+    )
+    train.add_argument(
+        "--peak-force-cost",
+        type=float,
+        default=0.0,
+        help="with --peak-force-threshold-n F: a training episode pays this per F newtons "
+        "of peak low-passed contact force above F that the residual added (default 0: "
+        "the paper's sparse reward)",
+    )
+    train.add_argument(
+        "--peak-force-threshold-n",
+        type=float,
+        help="the peak low-passed contact force that --peak-force-cost starts at, N",
     )
     train.add_argument(
         "--scaled-observation",

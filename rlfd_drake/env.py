@@ -132,7 +132,11 @@ class RlfdEnv(DrakeGymEnv):
     command that moves the set-point, from the DMP's pose at the activation time or
     from the start with no DMP: the paper's Table III baselines; "pure" acts for the
     whole 10 s), ``force_limit_penalty`` (>= 0: subtracted from the reward of the step
-    that breaks the force limit), ``diagram_config`` (RlfdDiagramConfig),
+    that breaks the force limit), ``peak_force_cost`` and ``peak_force_threshold_n``
+    (a step's reward loses ``cost * (e_t - e_(t-1))``, where ``e = max(0, F / threshold
+    - 1)`` and F is the peak low-passed contact force so far: an episode pays ``cost``
+    per threshold of peak force above the threshold that its residual steps added;
+    0 by default, the paper's reward), ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
     """
@@ -150,6 +154,8 @@ class RlfdEnv(DrakeGymEnv):
         info_handler=None,
         composition: str = "residual",
         force_limit_penalty: float = 0.0,
+        peak_force_cost: float = 0.0,
+        peak_force_threshold_n: float | None = None,
     ) -> None:
         self._init_args = dict(
             task=task,
@@ -157,6 +163,8 @@ class RlfdEnv(DrakeGymEnv):
             residual_mode=residual_mode,
             composition=composition,
             force_limit_penalty=force_limit_penalty,
+            peak_force_cost=peak_force_cost,
+            peak_force_threshold_n=peak_force_threshold_n,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -173,8 +181,12 @@ class RlfdEnv(DrakeGymEnv):
             raise ValueError(
                 f"force_limit_penalty must be a number >= 0, got {force_limit_penalty}"
             )
+        check_peak_force_cost(peak_force_cost, peak_force_threshold_n)
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)
+        self.peak_force_cost = float(peak_force_cost)
+        self.peak_force_threshold_n = peak_force_threshold_n
+        self._peak_force_excess = 0.0
         self.set_perturbation_scale(perturbation_scale)
         config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
         if residual_mode not in ("full", "translation", "orientation"):
@@ -288,12 +300,21 @@ class RlfdEnv(DrakeGymEnv):
             self._failure_reason = f"solver: {error.args[0] if error.args else error}"
         observation = self._observe()
         self._succeeded = self._failure_reason is None and self._inserted()
+        # The DMP's approach before the residual acts is not charged to it.
+        self._peak_force_excess = self._excess_peak_force()
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
         value = self.observation_port.Eval(self.simulator.get_context())
         self._last_observation = np.asarray(value, dtype=np.float32)
         return self._last_observation
+
+    def _excess_peak_force(self) -> float:
+        """max(0, peak low-passed contact force / peak_force_threshold_n - 1)."""
+        if self.peak_force_threshold_n is None:
+            return 0.0
+        peak = float(self._port("force_metrics")[3])
+        return max(0.0, peak / self.peak_force_threshold_n - 1.0)
 
     def _port(self, name: str) -> np.ndarray:
         return self.rlfd.diagram.GetOutputPort(name).Eval(self.simulator.get_context())
@@ -341,6 +362,10 @@ class RlfdEnv(DrakeGymEnv):
             error, _ = self._part_error()
             l1 = float(np.sum(np.abs(error)))
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
+        if self.peak_force_cost > 0.0:
+            excess = self._excess_peak_force()
+            reward -= self.peak_force_cost * (excess - self._peak_force_excess)
+            self._peak_force_excess = excess
         limit = self.task.force_limit_n
         # Force limits apply to the low-passed contact force (see ObserverConfig).
         if limit is not None and self._port("force_metrics")[3] > limit:
@@ -411,3 +436,19 @@ def register_envs() -> None:
 
 
 register_envs()
+
+
+def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
+    """Raises a ValueError unless ``cost`` >= 0 and, with a cost, ``threshold_n`` > 0
+    (a threshold without a cost is refused too: it would do nothing)."""
+    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
+        raise ValueError(f"peak_force_cost must be a number >= 0, got {cost!r}")
+    if cost > 0 and threshold_n is None:
+        raise ValueError(f"peak_force_cost {cost} needs peak_force_threshold_n")
+    if threshold_n is not None:
+        if cost == 0:
+            raise ValueError(f"peak_force_threshold_n {threshold_n} needs peak_force_cost > 0")
+        if not (isinstance(threshold_n, int | float) and np.isfinite(threshold_n)):
+            raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
+        if threshold_n <= 0:
+            raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")

@@ -38,7 +38,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFram
 
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
-from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv
+from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv, check_peak_force_cost
 from rlfd_drake.observation_scaling import (
     CONTACT_TORQUE_PER_UNIT_NM,
     ScaledObservation,
@@ -108,6 +108,12 @@ class TrainConfig:
             it. None = the task's own limit (RJ-45's 30 N; none for the others). The
             sparse reward stays the paper's: the limit only removes the chance of
             success from pushing hard.
+        peak_force_cost, peak_force_threshold_n: a training episode pays
+            ``peak_force_cost`` per ``peak_force_threshold_n`` N of peak low-passed
+            contact force above ``peak_force_threshold_n`` that its residual steps
+            added (``RlfdEnv``); 0 / None = the paper's sparse reward. Unlike a force
+            limit, the episode goes on, so a forceful success still scores above a
+            failure and exploration keeps its successes.
     """
 
     task: str = "peg_easy"
@@ -134,6 +140,8 @@ class TrainConfig:
     init_from: str | None = None
     force_limit_n: float | None = None
     force_limit_penalty: float = 0.0
+    peak_force_cost: float = 0.0
+    peak_force_threshold_n: float | None = None
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
@@ -195,6 +203,7 @@ class TrainConfig:
             )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
+        check_peak_force_cost(self.peak_force_cost, self.peak_force_threshold_n)
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
@@ -207,6 +216,8 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "residual_mode": config.residual_mode,
         "composition": config.composition,
         "force_limit_penalty": config.force_limit_penalty,
+        "peak_force_cost": config.peak_force_cost,
+        "peak_force_threshold_n": config.peak_force_threshold_n,
     }
 
 

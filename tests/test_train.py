@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -224,6 +225,53 @@ def test_training_force_limit_ends_episodes_that_push_harder(penalty):
             break
     assert terminated and info["force_limit_broken"] and not info["success"]
     assert reward == -penalty
+
+
+def test_peak_force_cost_charges_the_peak_force_the_residual_steps_add():
+    """--peak-force-cost C --peak-force-threshold-n F: the rewards of an episode sum to
+    the paper's minus C (e_end - e_activation), e = max(0, peak low-passed force / F - 1);
+    the episode goes on past the threshold."""
+    from rlfd_drake.train import _env_kwargs
+
+    options = {
+        "start_dp": np.zeros(3),
+        "start_dq": np.array([1.0, 0.0, 0.0, 0.0]),
+        "fixture_dp": np.array([0.002, 0.0, 0.0]),
+    }
+
+    def episode(**cost) -> tuple[list[float], float, float]:
+        env = RlfdEnv(**_env_kwargs(TrainConfig(task="peg_easy", **cost)))
+        env.reset(seed=0, options=options)
+        at_activation = float(env._port("force_metrics")[3])
+        rewards = []
+        for _ in range(10):  # the peg slides in at about step 15
+            _, reward, terminated, truncated, _ = env.step(np.zeros(6, np.float32))
+            rewards.append(reward)
+            if terminated or truncated:
+                break
+        return rewards, at_activation, float(env._port("force_metrics")[3])
+
+    paper, _, _ = episode()
+    charged, start, end = episode(peak_force_cost=0.5, peak_force_threshold_n=1.0)
+    assert len(charged) == len(paper) == 10  # no termination at the threshold
+    assert end > start  # the chamfer contact raises the peak after the activation
+    expected = 0.5 * (max(0.0, end - 1.0) - max(0.0, start - 1.0))
+    assert sum(paper) - sum(charged) == pytest.approx(expected, rel=1e-9)
+    assert all(c <= p for c, p in zip(charged, paper, strict=True))
+
+
+def test_peak_force_cost_is_validated():
+    for cost, threshold, message in (
+        (-1.0, 50.0, "peak_force_cost must be a number >= 0, got -1.0"),
+        (0.5, None, "peak_force_cost 0.5 needs peak_force_threshold_n"),
+        (0.0, 50.0, "peak_force_threshold_n 50.0 needs peak_force_cost > 0"),
+        (0.5, 0.0, "peak_force_threshold_n must be a number > 0, got 0.0"),
+        (0.5, float("inf"), "peak_force_threshold_n must be a number > 0, got inf"),
+    ):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            TrainConfig(peak_force_cost=cost, peak_force_threshold_n=threshold)
+    with pytest.raises(ValueError, match="peak_force_cost must be a number >= 0, got nan"):
+        RlfdEnv("peg_easy", peak_force_cost=float("nan"))
 
 
 def test_deployed_policy_matches_the_frame_stacked_training_view():
