@@ -81,6 +81,21 @@ def _vector_option(options: dict, key: str, size: int, default: np.ndarray) -> n
     return value
 
 
+def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
+    """Raises a ValueError unless ``cost`` >= 0 and, with a cost, ``threshold_n`` > 0
+    (a threshold without a cost is refused too: it would do nothing)."""
+    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
+        raise ValueError(f"peak_force_cost must be a number >= 0, got {cost!r}")
+    if cost > 0 and threshold_n is None:
+        raise ValueError(f"peak_force_cost {cost} needs peak_force_threshold_n")
+    if threshold_n is not None:
+        if cost == 0:
+            raise ValueError(f"peak_force_threshold_n {threshold_n} needs peak_force_cost > 0")
+        finite = isinstance(threshold_n, int | float) and np.isfinite(threshold_n)
+        if not (finite and threshold_n > 0):
+            raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
+
+
 class RlfdEnv(DrakeGymEnv):
     """Residual Learning from Demonstration on one insertion task.
 
@@ -185,7 +200,9 @@ class RlfdEnv(DrakeGymEnv):
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)
         self.peak_force_cost = float(peak_force_cost)
-        self.peak_force_threshold_n = peak_force_threshold_n
+        self.peak_force_threshold_n = (
+            None if peak_force_threshold_n is None else float(peak_force_threshold_n)
+        )
         self._peak_force_excess = 0.0
         self.set_perturbation_scale(perturbation_scale)
         config = diagram_config if diagram_config is not None else RlfdDiagramConfig()
@@ -436,19 +453,3 @@ def register_envs() -> None:
 
 
 register_envs()
-
-
-def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
-    """Raises a ValueError unless ``cost`` >= 0 and, with a cost, ``threshold_n`` > 0
-    (a threshold without a cost is refused too: it would do nothing)."""
-    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
-        raise ValueError(f"peak_force_cost must be a number >= 0, got {cost!r}")
-    if cost > 0 and threshold_n is None:
-        raise ValueError(f"peak_force_cost {cost} needs peak_force_threshold_n")
-    if threshold_n is not None:
-        if cost == 0:
-            raise ValueError(f"peak_force_threshold_n {threshold_n} needs peak_force_cost > 0")
-        if not (isinstance(threshold_n, int | float) and np.isfinite(threshold_n)):
-            raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
-        if threshold_n <= 0:
-            raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
