@@ -56,7 +56,8 @@ class TrainConfig:
     """One training run.
 
     Attributes:
-        task: task name (see ``rlfd tasks``).
+        task: task name (see ``rlfd tasks``) or the path of a task YAML file (a
+            variant, e.g. ``models/tasks/variants/gear_rot2deg.yaml``).
         algo: "ppo", "sac" (history-stacked observations) or "recurrent_ppo" (LSTM).
         episodes: training episodes (each up to 50 residual steps of 0.1 s).
         seed: seed of the policy, the envs and the episode sampling.
@@ -150,7 +151,12 @@ class TrainConfig:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"algo must be one of {ALGORITHMS}, got {self.algo!r}")
         if self.task not in ENV_IDS.values():
-            raise ValueError(f"task must be one of {sorted(ENV_IDS.values())}, got {self.task!r}")
+            if not str(self.task).endswith((".yaml", ".yml")):
+                raise ValueError(
+                    f"task must be one of {sorted(ENV_IDS.values())} or a task YAML path, "
+                    f"got {self.task!r}"
+                )
+            load_task(self.task)  # a task variant: its ValueError names the bad field
         for name in (
             "episodes",
             "envs",

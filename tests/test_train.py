@@ -183,6 +183,16 @@ def test_sac_gradient_steps_set_the_updates_per_step():
     assert model._n_updates == 3 * 2  # steps 5 and 6, three updates each
 
 
+def test_a_task_variant_trains_from_its_yaml():
+    """A task YAML path (a variant of a shipped task) reaches the envs as that task."""
+    from rlfd_drake.train import _env_kwargs
+
+    config = TrainConfig(task="models/tasks/variants/gear_rot2deg.yaml")
+    env = RlfdEnv(**_env_kwargs(config))
+    assert env.task.name == "gear_rot2deg"
+    assert env.task.residual_max_rotation_rad == pytest.approx(0.035)
+
+
 def test_bad_config_names_the_field():
     with pytest.raises(ValueError, match="sac_target_entropy"):
         TrainConfig(sac_target_entropy=float("nan"))
@@ -192,6 +202,8 @@ def test_bad_config_names_the_field():
         TrainConfig(episodes=0)
     with pytest.raises(ValueError, match="task must be one of"):
         TrainConfig(task="peg_huge")
+    with pytest.raises(ValueError, match="no_such_task.yaml"):
+        TrainConfig(task="models/tasks/variants/no_such_task.yaml")
     with pytest.raises(ValueError, match="force_limit_n must be a positive number, got 0"):
         TrainConfig(force_limit_n=0.0)
     with pytest.raises(ValueError, match="sac_gradient_steps must be >= 1, got 0"):
