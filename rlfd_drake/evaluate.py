@@ -48,7 +48,7 @@ from rlfd_drake.policies import (
     policy_file,
     trained_residual_mode,
 )
-from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.results import compact_png, results_dir, write_result
 from rlfd_drake.tasks import TaskSpec, load_task
 
 __all__ = [
@@ -576,7 +576,7 @@ def plot_success_vs_perturbation(results: list[dict], path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
-    return path
+    return compact_png(path)
 
 
 def write_evaluation(result: dict, name: str, command: str | None = None) -> dict[str, Path]:

@@ -69,3 +69,15 @@ def write_result(
     path = results_dir() / f"{name}.json"
     path.write_text(json.dumps(record, indent=2) + "\n")
     return path
+
+
+def compact_png(path: str | Path, colors: int = 64) -> Path:
+    """Re-saves a plot PNG with a palette of ``colors`` colours (about a third of the
+    bytes of matplotlib's RGBA for line plots), so that results/ stays small."""
+    from PIL import Image
+
+    path = Path(path)
+    with Image.open(path) as image:
+        palette = image.convert("RGB").quantize(colors=colors)
+    palette.save(path, format="PNG", optimize=True)
+    return path

@@ -76,6 +76,10 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
     assert "| unseen fixture error mm | n | success % |" in markdown
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"
     assert all(p.stat().st_size < 100_000 for p in paths.values())
+    from PIL import Image
+
+    with Image.open(paths["png"]) as plot:  # a palette image: results/ stays small
+        assert plot.mode == "P" and plot.size == (500, 340)
 
 
 def test_success_curve_of_binned_results():
