@@ -501,7 +501,12 @@ def build_parser() -> argparse.ArgumentParser:
     fit.set_defaults(func=_cmd_fit)
 
     train = sub.add_parser("train", help="train a residual policy (Stable-Baselines3)")
-    train.add_argument("--task", default="peg_easy")
+    train.add_argument(
+        "--task",
+        default="peg_easy",
+        help="a task name (rlfd tasks) or a task YAML path (e.g. a variant in "
+        "models/tasks/variants/)",
+    )
     train.add_argument("--algo", choices=["ppo", "sac", "recurrent_ppo"], default="ppo")
     train.add_argument("--episodes", type=int, default=700)
     train.add_argument("--seed", type=int, default=0)
@@ -677,7 +682,12 @@ def build_parser() -> argparse.ArgumentParser:
     seeds.set_defaults(func=_cmd_seeds)
 
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
-    evaluate.add_argument("--task", default="peg_easy")
+    evaluate.add_argument(
+        "--task",
+        default="peg_easy",
+        help="a task name (rlfd tasks) or a task YAML path (e.g. a variant in "
+        "models/tasks/variants/)",
+    )
     evaluate.add_argument(
         "--policy",
         default="dmp",
