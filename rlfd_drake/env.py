@@ -81,6 +81,16 @@ def _vector_option(options: dict, key: str, size: int, default: np.ndarray) -> n
     return value
 
 
+def check_force_terms(
+    force_limit_penalty: float, peak_force_cost: float, peak_force_threshold_n: float | None
+) -> None:
+    """Raises a ValueError naming the field unless the reward's force terms are valid:
+    ``force_limit_penalty`` >= 0 and see :func:`check_peak_force_cost`."""
+    if not (np.isfinite(force_limit_penalty) and force_limit_penalty >= 0):
+        raise ValueError(f"force_limit_penalty must be a number >= 0, got {force_limit_penalty}")
+    check_peak_force_cost(peak_force_cost, peak_force_threshold_n)
+
+
 def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
     """Raises a ValueError unless ``cost`` >= 0 and, with a cost, ``threshold_n`` > 0
     (a threshold without a cost is refused too: it would do nothing)."""
@@ -192,11 +202,7 @@ class RlfdEnv(DrakeGymEnv):
             raise ValueError(f"render_mode must be None, 'ansi' or 'human', got {render_mode!r}")
         if info_handler is not None and not callable(info_handler):
             raise ValueError("info_handler must be callable(simulator) -> dict")
-        if not (np.isfinite(force_limit_penalty) and force_limit_penalty >= 0):
-            raise ValueError(
-                f"force_limit_penalty must be a number >= 0, got {force_limit_penalty}"
-            )
-        check_peak_force_cost(peak_force_cost, peak_force_threshold_n)
+        check_force_terms(force_limit_penalty, peak_force_cost, peak_force_threshold_n)
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)
         self.peak_force_cost = float(peak_force_cost)
@@ -318,7 +324,7 @@ class RlfdEnv(DrakeGymEnv):
         observation = self._observe()
         self._succeeded = self._failure_reason is None and self._inserted()
         # The DMP's approach before the residual acts is not charged to it.
-        self._peak_force_excess = self._excess_peak_force()
+        self._peak_force_excess = self._excess_peak_force(self._peak_low_passed_force())
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
@@ -326,12 +332,15 @@ class RlfdEnv(DrakeGymEnv):
         self._last_observation = np.asarray(value, dtype=np.float32)
         return self._last_observation
 
-    def _excess_peak_force(self) -> float:
-        """max(0, peak low-passed contact force / peak_force_threshold_n - 1)."""
+    def _peak_low_passed_force(self) -> float:
+        """The peak of the low-passed contact force so far, N (what limits check)."""
+        return float(self._port("force_metrics")[3])
+
+    def _excess_peak_force(self, peak_n: float) -> float:
+        """max(0, peak_n / peak_force_threshold_n - 1); 0 without a threshold."""
         if self.peak_force_threshold_n is None:
             return 0.0
-        peak = float(self._port("force_metrics")[3])
-        return max(0.0, peak / self.peak_force_threshold_n - 1.0)
+        return max(0.0, peak_n / self.peak_force_threshold_n - 1.0)
 
     def _port(self, name: str) -> np.ndarray:
         return self.rlfd.diagram.GetOutputPort(name).Eval(self.simulator.get_context())
@@ -379,13 +388,14 @@ class RlfdEnv(DrakeGymEnv):
             error, _ = self._part_error()
             l1 = float(np.sum(np.abs(error)))
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
+        # Force limits and costs apply to the low-passed contact force (ObserverConfig).
+        peak_n = self._peak_low_passed_force()
         if self.peak_force_cost > 0.0:
-            excess = self._excess_peak_force()
+            excess = self._excess_peak_force(peak_n)
             reward -= self.peak_force_cost * (excess - self._peak_force_excess)
             self._peak_force_excess = excess
         limit = self.task.force_limit_n
-        # Force limits apply to the low-passed contact force (see ObserverConfig).
-        if limit is not None and self._port("force_metrics")[3] > limit:
+        if limit is not None and peak_n > limit:
             if not self._force_limit_broken:
                 reward -= self.force_limit_penalty
             self._force_limit_broken = True

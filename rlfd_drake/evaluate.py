@@ -620,8 +620,13 @@ def evaluation_name(
     with half the policy's noise)."""
     mode = "" if residual_mode == "full" else f"_{residual_mode}"
     if stochastic:
-        mode += "_stochastic" + ("" if noise_scale == 1.0 else f"{noise_scale:g}")
+        mode += sampling_suffix(noise_scale)
     return f"eval_{task}_{policy_stem(policy_spec)}{mode}_s{seed}"
+
+
+def sampling_suffix(noise_scale: float = 1.0) -> str:
+    """The file-name mark of sampled actions: ``_stochastic``, ``_stochastic0.5``."""
+    return "_stochastic" + ("" if noise_scale == 1.0 else f"{noise_scale:g}")
 
 
 def result_from_json(path: str | Path) -> dict:

@@ -224,11 +224,7 @@ class DeployedPolicy:
         self._recurrent = hasattr(model.policy, "lstm_actor")
         self.noise_scale = float(noise_scale)
         self._scaled_sampling = not deterministic and self.noise_scale != 1.0
-        sac_actor = getattr(model.policy, "actor", None)
-        gaussian = (hasattr(sac_actor, "get_action_dist_params") and not sac_actor.use_sde) or (
-            hasattr(model.policy, "get_distribution") and not model.policy.use_sde
-        )
-        if self._scaled_sampling and (self._recurrent or not gaussian):
+        if self._scaled_sampling and (self._recurrent or not _samples_a_gaussian(model)):
             raise ValueError(
                 f"noise_scale {noise_scale} needs a SAC or PPO policy; "
                 f"{type(model).__name__} (or state-dependent noise) samples only at its "
@@ -295,3 +291,12 @@ def check_noise_scale(noise_scale: float) -> None:
     """Raises a ValueError unless ``noise_scale`` is a finite number > 0."""
     if not (isinstance(noise_scale, int | float) and np.isfinite(noise_scale) and noise_scale > 0):
         raise ValueError(f"noise_scale must be a number > 0, got {noise_scale!r}")
+
+
+def _samples_a_gaussian(model) -> bool:
+    """Whether ``model`` samples a plain Gaussian whose std can be scaled: SAC's actor
+    or PPO's policy, without state-dependent (gSDE) noise."""
+    sac_actor = getattr(model.policy, "actor", None)
+    if hasattr(sac_actor, "get_action_dist_params"):
+        return not sac_actor.use_sde
+    return hasattr(model.policy, "get_distribution") and not model.policy.use_sde

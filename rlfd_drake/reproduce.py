@@ -543,7 +543,7 @@ def stored_or_new_evaluation(
 def _cell(
     row: Row, task: str, budget: str, seed: int, workers: int, metric: str = "success"
 ) -> dict:
-    from rlfd_drake.evaluate import NAMED_POLICIES
+    from rlfd_drake.evaluate import NAMED_POLICIES, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
     kind, _, detail = row.source.partition(":")
@@ -589,7 +589,7 @@ def _cell(
         mode += f"_{row.orientation_source}_orientation"
         eval_mode = "full"
     if row.stochastic:
-        mode += "_stochastic" + ("" if row.noise_scale == 1.0 else f"{row.noise_scale:g}")
+        mode += sampling_suffix(row.noise_scale)
     name = f"eval_{task}_{label}{mode}_n{eval_episodes}_s{seed}"
 
     def evaluation(available: bool) -> dict | None:

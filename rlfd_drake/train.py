@@ -38,7 +38,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFram
 
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
-from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv, check_peak_force_cost
+from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv, check_force_terms
 from rlfd_drake.observation_scaling import (
     CONTACT_TORQUE_PER_UNIT_NM,
     ScaledObservation,
@@ -203,13 +203,11 @@ class TrainConfig:
             raise ValueError(
                 f"contact_torque_nm={self.contact_torque_nm} needs scaled_observation=True"
             )
-        if not (np.isfinite(self.force_limit_penalty) and self.force_limit_penalty >= 0):
-            raise ValueError(
-                f"force_limit_penalty must be a number >= 0, got {self.force_limit_penalty}"
-            )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
-        check_peak_force_cost(self.peak_force_cost, self.peak_force_threshold_n)
+        check_force_terms(
+            self.force_limit_penalty, self.peak_force_cost, self.peak_force_threshold_n
+        )
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
