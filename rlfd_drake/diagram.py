@@ -124,6 +124,14 @@ class RlfdDiagramConfig:
         )
         return float(translation), float(rotation)
 
+    def impedance_for(self, task: TaskSpec) -> CartesianImpedanceConfig:
+        """The controller's gains on ``task``: this config's, with the task's rotational
+        stiffness where the task sets one."""
+        stiffness = task.rotational_stiffness_Nm_per_rad
+        if stiffness is None:
+            return self.impedance
+        return replace(self.impedance, rotational_stiffness_Nm_per_rad=(stiffness,) * 3)
+
 
 @dataclass
 class RlfdDiagram:
@@ -207,7 +215,7 @@ def BuildRlfdDiagram(
 
     control_plant = MakeSceneControlModel(scene)
     controller = builder.AddNamedSystem(
-        "impedance", CartesianImpedanceController(control_plant, config.impedance)
+        "impedance", CartesianImpedanceController(control_plant, config.impedance_for(task))
     )
     X_WGoal_nominal = NominalGoal(task)
     dmp_system = builder.AddNamedSystem("dmp", DmpSystem(dmp_model, period_s=config.dmp_period_s))

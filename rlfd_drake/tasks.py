@@ -235,6 +235,9 @@ class TaskSpec:
             of 1 means for this task (m, rad): a few times its fixture error, so the
             policy's range and its exploration are on the scale of what it must
             correct (RJ-45's 30 N limit breaks under a 1 cm jiggle).
+        rotational_stiffness_Nm_per_rad: optional rotational stiffness of the Cartesian
+            impedance controller on this task, N m/rad (None = the controller's, 150):
+            a softer wrist turns a rotation residual into a smaller contact torque.
     """
 
     name: str
@@ -253,6 +256,7 @@ class TaskSpec:
     residual_activation_s: float = 5.0
     residual_max_translation_m: float = 0.01
     residual_max_rotation_rad: float = 0.087
+    rotational_stiffness_Nm_per_rad: float | None = None
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -437,6 +441,7 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.residual_activation_s, "residual_activation_s", allow_zero=True)
     _positive(task.residual_max_translation_m, "residual_max_translation_m")
     _positive(task.residual_max_rotation_rad, "residual_max_rotation_rad")
+    _positive(task.rotational_stiffness_Nm_per_rad, "rotational_stiffness_Nm_per_rad")
     if task.residual_activation_s > task.episode_time_s:
         raise ValueError(
             f"residual_activation_s = {task.residual_activation_s} is after the episode end "

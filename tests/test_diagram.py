@@ -7,6 +7,8 @@ diagram checks the 10 Hz residual path.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.common.eigen_geometry import AngleAxis, Quaternion
@@ -212,3 +214,16 @@ def test_policy_inside_the_diagram_acts_at_10_hz(peg):
     np.testing.assert_allclose(
         dp, config.residual_bounds(task)[0] * residual[:3, after], atol=1e-12
     )
+
+
+def test_the_task_sets_the_wrist_stiffness(peg):
+    """A task's rotational stiffness reaches the controller; the translational gains and
+    the config's own default stay as they were."""
+    task, model, _ = peg
+    config = RlfdDiagramConfig()
+    soft = dataclasses.replace(task, rotational_stiffness_Nm_per_rad=20.0)
+    gains = BuildRlfdDiagram(soft, model, config).controller.config
+    assert gains.rotational_stiffness_Nm_per_rad == (20.0, 20.0, 20.0)
+    assert gains.translational_stiffness_N_per_m == config.impedance.translational_stiffness_N_per_m
+    assert config.impedance.rotational_stiffness_Nm_per_rad == (150.0, 150.0, 150.0)
+    assert config.impedance_for(task) is config.impedance

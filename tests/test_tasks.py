@@ -186,3 +186,31 @@ def test_fixture_error():
     assert dq[1:] / np.linalg.norm(dq[1:]) == pytest.approx([0.0, 1.0, 0.0])
     angles = [_angle_deg(sample_fixture_error(peg, rng)[1]) for _ in range(100)]
     assert max(angles) <= 2.0 + 1e-9 and min(angles) >= 0.0
+
+
+@pytest.mark.parametrize("value", [0.0, -20.0, float("nan"), float("inf")])
+def test_bad_rotational_stiffness(tmp_path, value):
+    path = _write_variant(tmp_path, lambda d: d.update(rotational_stiffness_Nm_per_rad=value))
+    message = "must be positive" if math.isfinite(value) else "expected a finite number"
+    with pytest.raises(ValueError, match=rf"rotational_stiffness_Nm_per_rad.*{message}"):
+        load_task(path, check_demo=False)
+
+
+def test_soft_wrist_variants_change_only_the_stiffness():
+    """Each soft-wrist variant is its shipped task with a 20 N m/rad wrist: same part,
+    fixture, starts, errors and residual bounds (so evaluations share the starts)."""
+    for name in ("peg", "gear", "rj45"):
+        shipped = load_task(name, check_demo=False)
+        variant = load_task(tasks_dir() / "variants" / f"{name}_soft_wrist.yaml", check_demo=False)
+        assert shipped.rotational_stiffness_Nm_per_rad is None
+        assert variant.rotational_stiffness_Nm_per_rad == 20.0
+        assert (
+            dataclasses.replace(
+                variant,
+                name=name,
+                description=shipped.description,
+                rotational_stiffness_Nm_per_rad=None,
+            )
+            == shipped
+        )
+        assert evaluation_size(variant) == evaluation_size(shipped)
