@@ -649,7 +649,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reproduce.add_argument(
         "--table",
-        choices=["1", "2", "3", "4", "5", "6", "forces", "forces_full_pose", "all"],
+        choices=[
+            *("1", "2", "3", "4", "5", "6", "forces", "forces_full_pose"),
+            *("wrist", "forces_wrist", "all"),
+        ],
         default="all",
     )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
