@@ -174,25 +174,20 @@ RUNS: dict[str, dict[str, tuple[str, str]]] = {
 }
 # Full-pose SAC with the shipped policy's 4 gradient steps per env step (Table IV's
 # second SAC rows; RJ-45 keeps its 1000 warm-up steps).
+_SAC_GS4_FLAGS = {
+    task: f"{_SAC_GS4_RECIPE} {extra}".strip()
+    for task, extra in (("peg", ""), ("gear", ""), ("rj45", "--sac-learning-starts 1000"))
+}
 RUNS["rlfd_gs4"] = {
-    task: _run(f"runs/{task}_sac_gs4_s0", task, episodes, f"{_SAC_GS4_RECIPE} {flags}".strip())
-    for task, episodes, flags in (
-        ("peg", 500, ""),
-        ("gear", 300, ""),
-        ("rj45", 500, "--sac-learning-starts 1000"),
-    )
+    task: _run(f"runs/{task}_sac_gs4_s0", task, episodes, _SAC_GS4_FLAGS[task])
+    for task, episodes in (("peg", 500), ("gear", 300), ("rj45", 500))
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
 RUNS["rlfd_gs4_soft_wrist"] = {
-    path: _run(f"runs/{task}_soft_wrist_sac_gs4_s0", path, episodes, flags)
-    for (task, path), episodes, flags in zip(
-        _SOFT_WRIST.items(),
-        (500, 300, 500),
-        (_SAC_GS4_RECIPE, _SAC_GS4_RECIPE, f"{_SAC_GS4_RECIPE} --sac-learning-starts 1000"),
-        strict=True,
-    )
+    path: _run(f"runs/{task}_soft_wrist_sac_gs4_s0", path, episodes, _SAC_GS4_FLAGS[task])
+    for (task, path), episodes in zip(_SOFT_WRIST.items(), (500, 300, 500), strict=True)
 }
 # Table IV's PPO / None: translation-only residuals (300 episodes: what fits a session;
 # the paper trains 500).
@@ -223,6 +218,30 @@ RUNS["from_source_60"] = {
         "ppo",
     )
     for task, source in (("gear", "rj45"), ("rj45", "gear"))
+}
+# Table VI with Table IV's 4-update SAC residuals. A fine-tune warms its replay buffer
+# with the copied policy's own 1000 steps first: updating from the first step wrecked
+# the copied gear policy (results/full_pose_study.md).
+_TRANSFER_PAIRS = (("gear", "rj45"), ("rj45", "gear"))
+RUNS["sac_source_as_is"] = {task: RUNS["rlfd_gs4"][source] for task, source in _TRANSFER_PAIRS}
+RUNS["sac_scratch_60"] = {
+    task: _run(
+        f"runs/{task}_sac_gs4_scratch_e60_s0",
+        task,
+        60,
+        _SAC_GS4_FLAGS[task],
+    )
+    for task, _ in _TRANSFER_PAIRS
+}
+RUNS["sac_from_source_60"] = {
+    task: _run(
+        f"runs/{task}_sac_gs4_from_{source}_e60_s0",
+        task,
+        60,
+        f"{_SAC_GS4_RECIPE} --sac-learning-starts 1000 "
+        f"--init-from {RUNS['rlfd_gs4'][source][0]}/policy.zip",
+    )
+    for task, source in _TRANSFER_PAIRS
 }
 
 
@@ -390,16 +409,32 @@ TABLES: dict[str, Table] = {
         "paper: 12.5K and 8K); they act by velocity commands (5 cm/s, 20 deg/s per unit).",
     ),
     "6": Table(
-        "Table VI: transfer between gear and RJ-45 (full-pose PPO residuals)",
+        "Table VI: transfer between gear and RJ-45 (full-pose PPO and SAC residuals)",
         {"gear": "gear", "rj45": "rj45"},
         [
             Row("full training on the target", "run:rlfd_ppo", {"gear": 92.2, "rj45": 70.6}),
             Row("source policy as is", "run:source_as_is", {"gear": 85.4, "rj45": 54.5}),
             Row("60 episodes from scratch", "run:scratch_60", {"gear": 70.3, "rj45": 59.1}),
             Row("60 episodes from the source", "run:from_source_60", {"gear": 92.0, "rj45": 70.6}),
+            *(
+                row
+                for label, key, paper in (
+                    ("full training on the target", "rlfd_gs4", (92.2, 70.6)),
+                    ("source policy as is", "sac_source_as_is", (85.4, 54.5)),
+                    ("60 episodes from scratch", "sac_scratch_60", (70.3, 59.1)),
+                    ("60 episodes from the source", "sac_from_source_60", (92.0, 70.6)),
+                )
+                for row in _mean_and_sampled(
+                    f"SAC, 4 updates per step: {label}",
+                    f"run:{key}",
+                    dict(zip(("gear", "rj45"), paper, strict=True)),
+                )
+            ),
         ],
         "Source of gear = the RJ-45 policy and back. The paper's 60 episodes are 3 PPO "
-        "updates; here PPO updates every 512 steps (about 10 gear or 35 RJ-45 episodes).",
+        "updates; here PPO updates every 512 steps (about 10 gear or 35 RJ-45 episodes). "
+        "The SAC rows use Table IV's 4-update SAC residuals (the paper's columns are its "
+        "PPO); their fine-tunes start updating after 1000 steps of the copied policy.",
     ),
 }
 

@@ -367,3 +367,23 @@ def test_the_wrist_table_evaluates_the_soft_wrist_variants(tmp_path, monkeypatch
     reason = mean_action["ours"]["gear"]["reason"]
     assert "rlfd train --task models/tasks/variants/gear_soft_wrist.yaml" in reason
     assert "--sac-gradient-steps 4" in reason
+
+
+def test_the_sac_transfer_rows_fine_tune_the_other_tasks_policy():
+    """Table VI's SAC rows: the source is the other task's 4-update SAC policy, its
+    fine-tune warms up on 1000 steps of the copied policy, and every 60-episode run
+    keeps the full run's recipe."""
+    runs = reproduce.RUNS
+    for task, source in (("gear", "rj45"), ("rj45", "gear")):
+        source_folder, source_command = runs["rlfd_gs4"][source]
+        assert runs["sac_source_as_is"][task][0] == source_folder
+        folder, command = runs["sac_from_source_60"][task]
+        assert f"--task {task} " in command and "--episodes 60 " in command
+        assert f"--init-from {source_folder}/policy.zip" in command
+        assert "--sac-learning-starts 1000" in command and "--sac-gradient-steps 4" in command
+        scratch = runs["sac_scratch_60"][task][1]
+        assert "--init-from" not in scratch and "--episodes 60 " in scratch
+        full_recipe = runs["rlfd_gs4"][task][1].split("--episodes")[1].split("--out")[0]
+        assert full_recipe.replace(" 300 ", " 60 ").replace(" 500 ", " 60 ") in scratch
+    labels = [row.label for row in reproduce.TABLES["6"].rows]
+    assert "SAC, 4 updates per step: 60 episodes from the source, sampled actions" in labels
