@@ -318,6 +318,12 @@ def operational_space_inertia(J: np.ndarray, M: np.ndarray) -> np.ndarray:
     return np.linalg.inv(J @ np.linalg.solve(M, J.T))
 
 
+def low_pass_gain(period_s: float, time_constant_s: float) -> float:
+    """Gain g of the discrete first-order filter ``y += g (u - y)``: the exact step of
+    ``tau dy/dt = u - y`` over ``period_s`` for an input held over the period."""
+    return float(-np.expm1(-period_s / time_constant_s))
+
+
 def critical_damping(
     stiffness: np.ndarray, effective_inertia: np.ndarray, damping_ratio: float = 1.0
 ) -> np.ndarray:

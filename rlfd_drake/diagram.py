@@ -36,6 +36,7 @@ from rlfd_drake.systems.impedance import (
     MakePandaControlModel,
 )
 from rlfd_drake.systems.observer import OBSERVATION_SIZE, Observer, ObserverConfig
+from rlfd_drake.systems.residual_filter import ResidualFilter, ResidualFilterConfig
 from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
 from rlfd_drake.systems.setpoint_triad import SetpointTriad
 from rlfd_drake.systems.velocity_command import VelocityCommandConfig, VelocityCommandSetpoint
@@ -301,7 +302,27 @@ def BuildRlfdDiagram(
         )
         connect(observer.GetOutputPort("observation"), residual_policy.GetInputPort("observation"))
         residual_source = residual_policy.GetOutputPort("residual")
-    connect(residual_source, composer.GetInputPort("residual"))
+    if task.residual_filter_time_constant_s is not None and config.composition != "residual":
+        raise ValueError(
+            f"task {task.name!r} filters the residual (residual_filter_time_constant_s = "
+            f"{task.residual_filter_time_constant_s}), which only the 'residual' composition "
+            f"has; got composition {config.composition!r}"
+        )
+    if task.residual_filter_time_constant_s is not None:
+        residual_filter = builder.AddNamedSystem(
+            "residual_filter",
+            ResidualFilter(
+                ResidualFilterConfig(
+                    time_constant_s=task.residual_filter_time_constant_s,
+                    period_s=config.impedance.period_s,
+                    activation_time_s=activation,
+                )
+            ),
+        )
+        connect(residual_source, residual_filter.get_input_port())
+        connect(residual_filter.get_output_port(), composer.GetInputPort("residual"))
+    else:
+        connect(residual_source, composer.GetInputPort("residual"))
     if coupling_policy is not None:
         coupling = builder.AddNamedSystem(
             "coupling_policy",

@@ -227,3 +227,26 @@ def test_the_task_sets_the_wrist_stiffness(peg):
     assert gains.translational_stiffness_N_per_m == config.impedance.translational_stiffness_N_per_m
     assert config.impedance.rotational_stiffness_Nm_per_rad == (150.0, 150.0, 150.0)
     assert config.impedance_for(task) is config.impedance
+
+
+def test_a_task_with_a_residual_filter_feeds_the_composer_through_it(peg):
+    """The filter sits between the residual and the composer (the observer still sees
+    the policy's own action); only the residual composition can have it."""
+    task, model, X_WP_start = peg
+    smooth = dataclasses.replace(task, residual_filter_time_constant_s=0.1)
+    rlfd = BuildRlfdDiagram(smooth, model, RlfdDiagramConfig(residual_activation_s=0.0))
+    filter_system = rlfd.diagram.GetSubsystemByName("residual_filter")
+    assert filter_system.config.time_constant_s == 0.1
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.array([1.0, 0, 0, 0, 0, 0]))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.AdvanceTo(0.1)  # one time constant
+    offset = (
+        rlfd.diagram.GetOutputPort("X_WE_desired").Eval(context)[0]
+        - rlfd.diagram.GetOutputPort("X_WE_base").Eval(context)[0]
+    )
+    max_translation_m, _ = RlfdDiagramConfig().residual_bounds(task)
+    assert offset == pytest.approx((1.0 - np.exp(-1.0)) * max_translation_m, rel=0.03)
+    with pytest.raises(ValueError, match="residual_filter_time_constant_s = 0.1"):
+        BuildRlfdDiagram(smooth, model, RlfdDiagramConfig(composition="hybrid"))
