@@ -185,6 +185,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 from rlfd_drake.paths import SHIPPED_POLICY  # noqa: E402  (re-exported for notebooks)
+from rlfd_drake.reproduce import TABLES  # noqa: E402  (light: numpy only; --table choices)
 
 
 def _cmd_demo_main(args: argparse.Namespace) -> int:
@@ -364,7 +365,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from rlfd_drake.reproduce import TABLES, reproduce_table
+    from rlfd_drake.reproduce import reproduce_table
 
     numbers = sorted(TABLES) if args.table == "all" else [args.table]
     for number in numbers:
@@ -649,10 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reproduce.add_argument(
         "--table",
-        choices=[
-            *("1", "2", "3", "4", "5", "6", "forces", "forces_full_pose"),
-            *("wrist", "forces_wrist", "all"),
-        ],
+        choices=[*sorted(TABLES), "all"],
         default="all",
     )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")

@@ -302,27 +302,28 @@ def BuildRlfdDiagram(
         )
         connect(observer.GetOutputPort("observation"), residual_policy.GetInputPort("observation"))
         residual_source = residual_policy.GetOutputPort("residual")
-    if task.residual_filter_time_constant_s is not None and config.composition != "residual":
-        raise ValueError(
-            f"task {task.name!r} filters the residual (residual_filter_time_constant_s = "
-            f"{task.residual_filter_time_constant_s}), which only the 'residual' composition "
-            f"has; got composition {config.composition!r}"
-        )
-    if task.residual_filter_time_constant_s is not None:
+    composer_residual = residual_source
+    time_constant_s = task.residual_filter_time_constant_s
+    if time_constant_s is not None:
+        if config.composition != "residual":
+            raise ValueError(
+                f"task {task.name!r} filters the residual (residual_filter_time_constant_s = "
+                f"{time_constant_s}), which only the 'residual' composition has; got "
+                f"composition {config.composition!r}"
+            )
         residual_filter = builder.AddNamedSystem(
             "residual_filter",
             ResidualFilter(
                 ResidualFilterConfig(
-                    time_constant_s=task.residual_filter_time_constant_s,
+                    time_constant_s=time_constant_s,
                     period_s=config.impedance.period_s,
                     activation_time_s=activation,
                 )
             ),
         )
         connect(residual_source, residual_filter.get_input_port())
-        connect(residual_filter.get_output_port(), composer.GetInputPort("residual"))
-    else:
-        connect(residual_source, composer.GetInputPort("residual"))
+        composer_residual = residual_filter.get_output_port()
+    connect(composer_residual, composer.GetInputPort("residual"))
     if coupling_policy is not None:
         coupling = builder.AddNamedSystem(
             "coupling_policy",

@@ -178,16 +178,19 @@ _SAC_GS4_FLAGS = {
     task: f"{_SAC_GS4_RECIPE} {extra}".strip()
     for task, extra in (("peg", ""), ("gear", ""), ("rj45", "--sac-learning-starts 1000"))
 }
+_FULL_POSE_EPISODES = {"peg": 500, "gear": 300, "rj45": 500}
 RUNS["rlfd_gs4"] = {
     task: _run(f"runs/{task}_sac_gs4_s0", task, episodes, _SAC_GS4_FLAGS[task])
-    for task, episodes in (("peg", 500), ("gear", 300), ("rj45", 500))
+    for task, episodes in _FULL_POSE_EPISODES.items()
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
 RUNS["rlfd_gs4_soft_wrist"] = {
-    path: _run(f"runs/{task}_soft_wrist_sac_gs4_s0", path, episodes, _SAC_GS4_FLAGS[task])
-    for (task, path), episodes in zip(_SOFT_WRIST.items(), (500, 300, 500), strict=True)
+    path: _run(
+        f"runs/{task}_soft_wrist_sac_gs4_s0", path, _FULL_POSE_EPISODES[task], _SAC_GS4_FLAGS[task]
+    )
+    for task, path in _SOFT_WRIST.items()
 }
 # Table IV's PPO / None: translation-only residuals (300 episodes: what fits a session;
 # the paper trains 500).
@@ -225,12 +228,7 @@ RUNS["from_source_60"] = {
 _TRANSFER_PAIRS = (("gear", "rj45"), ("rj45", "gear"))
 RUNS["sac_source_as_is"] = {task: RUNS["rlfd_gs4"][source] for task, source in _TRANSFER_PAIRS}
 RUNS["sac_scratch_60"] = {
-    task: _run(
-        f"runs/{task}_sac_gs4_scratch_e60_s0",
-        task,
-        60,
-        _SAC_GS4_FLAGS[task],
-    )
+    task: _run(f"runs/{task}_sac_gs4_scratch_e60_s0", task, 60, _SAC_GS4_FLAGS[task])
     for task, _ in _TRANSFER_PAIRS
 }
 RUNS["sac_from_source_60"] = {
