@@ -127,11 +127,15 @@ class RlfdDiagramConfig:
 
     def impedance_for(self, task: TaskSpec) -> CartesianImpedanceConfig:
         """The controller's gains on ``task``: this config's, with the task's rotational
-        stiffness where the task sets one."""
-        stiffness = task.rotational_stiffness_Nm_per_rad
-        if stiffness is None:
-            return self.impedance
-        return replace(self.impedance, rotational_stiffness_Nm_per_rad=(stiffness,) * 3)
+        and translational stiffness where the task sets them."""
+        gains = self.impedance
+        if task.rotational_stiffness_Nm_per_rad is not None:
+            stiffness = task.rotational_stiffness_Nm_per_rad
+            gains = replace(gains, rotational_stiffness_Nm_per_rad=(stiffness,) * 3)
+        if task.translational_stiffness_N_per_m is not None:
+            stiffness = task.translational_stiffness_N_per_m
+            gains = replace(gains, translational_stiffness_N_per_m=(stiffness,) * 3)
+        return gains
 
 
 @dataclass

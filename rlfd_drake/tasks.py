@@ -238,6 +238,9 @@ class TaskSpec:
         rotational_stiffness_Nm_per_rad: optional rotational stiffness of the Cartesian
             impedance controller on this task, N m/rad (None = the controller's, 150):
             a softer wrist turns a rotation residual into a smaller contact torque.
+        translational_stiffness_N_per_m: optional translational stiffness of the
+            controller on this task, N/m (None = the controller's, 2000): the spring
+            force with which a part resting on its fixture is pressed down.
         residual_filter_time_constant_s: optional time constant of a first-order
             low-pass filter on the residual action (None = none: each 10 Hz action
             steps the set-point), s.
@@ -260,6 +263,7 @@ class TaskSpec:
     residual_max_translation_m: float = 0.01
     residual_max_rotation_rad: float = 0.087
     rotational_stiffness_Nm_per_rad: float | None = None
+    translational_stiffness_N_per_m: float | None = None
     residual_filter_time_constant_s: float | None = None
     source: Path | None = field(default=None, compare=False)
 
@@ -446,6 +450,7 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.residual_max_translation_m, "residual_max_translation_m")
     _positive(task.residual_max_rotation_rad, "residual_max_rotation_rad")
     _positive(task.rotational_stiffness_Nm_per_rad, "rotational_stiffness_Nm_per_rad")
+    _positive(task.translational_stiffness_N_per_m, "translational_stiffness_N_per_m")
     _positive(task.residual_filter_time_constant_s, "residual_filter_time_constant_s")
     if task.residual_activation_s > task.episode_time_s:
         raise ValueError(

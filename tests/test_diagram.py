@@ -229,6 +229,21 @@ def test_the_task_sets_the_wrist_stiffness(peg):
     assert config.impedance_for(task) is config.impedance
 
 
+def test_the_task_sets_the_translational_stiffness(peg):
+    """A task's translational stiffness reaches the controller alongside its rotational
+    one; each leaves the other at the config's value."""
+    task, model, _ = peg
+    config = RlfdDiagramConfig()
+    soft_z = dataclasses.replace(task, translational_stiffness_N_per_m=1000.0)
+    gains = config.impedance_for(soft_z)
+    assert gains.translational_stiffness_N_per_m == (1000.0, 1000.0, 1000.0)
+    assert gains.rotational_stiffness_Nm_per_rad == config.impedance.rotational_stiffness_Nm_per_rad
+    both = dataclasses.replace(soft_z, rotational_stiffness_Nm_per_rad=20.0)
+    controller = BuildRlfdDiagram(both, model, config).controller.config
+    assert controller.translational_stiffness_N_per_m == (1000.0, 1000.0, 1000.0)
+    assert controller.rotational_stiffness_Nm_per_rad == (20.0, 20.0, 20.0)
+
+
 def test_a_task_with_a_residual_filter_feeds_the_composer_through_it(peg):
     """The filter sits between the residual and the composer (the observer still sees
     the policy's own action); only the residual composition can have it."""

@@ -188,11 +188,14 @@ def test_fixture_error():
     assert max(angles) <= 2.0 + 1e-9 and min(angles) >= 0.0
 
 
+@pytest.mark.parametrize(
+    "field", ["rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m"]
+)
 @pytest.mark.parametrize("value", [0.0, -20.0, float("nan"), float("inf")])
-def test_bad_rotational_stiffness(tmp_path, value):
-    path = _write_variant(tmp_path, lambda d: d.update(rotational_stiffness_Nm_per_rad=value))
+def test_bad_controller_stiffness(tmp_path, field, value):
+    path = _write_variant(tmp_path, lambda d: d.update({field: value}))
     message = "must be positive" if math.isfinite(value) else "expected a finite number"
-    with pytest.raises(ValueError, match=rf"rotational_stiffness_Nm_per_rad.*{message}"):
+    with pytest.raises(ValueError, match=rf"{field}.*{message}"):
         load_task(path, check_demo=False)
 
 
