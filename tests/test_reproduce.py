@@ -344,8 +344,22 @@ def test_a_stored_evaluation_missing_new_figures_is_kept_when_its_policy_is_gone
     assert reproduce._format_metric(cell, "peak_force") == "120; LP n/a; n/a"
 
 
-def test_the_wrist_table_evaluates_the_soft_wrist_variants(tmp_path, monkeypatch):
-    """The soft-wrist table's columns are task YAML paths: each evaluation gets the path
+_SMOOTH_VARIANTS = {
+    "peg": "peg_soft_wrist_smooth_rot2deg",
+    "gear": "gear_soft_wrist_smooth_rot2deg",
+    "rj45": "rj45_soft_wrist_smooth",
+}
+
+
+@pytest.mark.parametrize(
+    "table, variants",
+    [
+        ("wrist", {t: f"{t}_soft_wrist" for t in ("peg", "gear", "rj45")}),
+        ("wrist_smooth", _SMOOTH_VARIANTS),
+    ],
+)
+def test_the_wrist_tables_evaluate_the_variants(tmp_path, monkeypatch, table, variants):
+    """The soft-wrist tables' columns are task YAML paths: each evaluation gets the path
     and a file named by the variant (as ``rlfd evaluate`` names it); a run not trained
     here is "not run" with the command that trains it on the variant."""
     monkeypatch.chdir(tmp_path)
@@ -357,15 +371,16 @@ def test_the_wrist_table_evaluates_the_soft_wrist_variants(tmp_path, monkeypatch
 
     monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
     (tmp_path / "results").mkdir()
-    data = reproduce.reproduce_table("wrist", budget="quick", seed=0, workers=1)
-    for task in ("peg", "gear", "rj45"):
-        path = f"models/tasks/variants/{task}_soft_wrist.yaml"
-        assert asked[f"eval_{task}_soft_wrist_dmp_n40_s0"] == path
-        assert asked[f"eval_{task}_soft_wrist_{task}_soft_wrist_sac_gs4_s0_n40_s0"] == path
+    data = reproduce.reproduce_table(table, budget="quick", seed=0, workers=1)
+    for variant in variants.values():
+        path = f"models/tasks/variants/{variant}.yaml"
+        assert asked[f"eval_{variant}_dmp_n40_s0"] == path
+        assert asked[f"eval_{variant}_{variant}_sac_gs4_s0_n40_s0"] == path
     dmp, mean_action, _ = data["rows"]
-    assert dmp["ours"]["gear"]["result_file"] == "eval_gear_soft_wrist_dmp_n40_s0.json"
+    gear = variants["gear"]
+    assert dmp["ours"]["gear"]["result_file"] == f"eval_{gear}_dmp_n40_s0.json"
     reason = mean_action["ours"]["gear"]["reason"]
-    assert "rlfd train --task models/tasks/variants/gear_soft_wrist.yaml" in reason
+    assert f"rlfd train --task models/tasks/variants/{gear}.yaml" in reason
     assert "--sac-gradient-steps 4" in reason
 
 
