@@ -501,63 +501,47 @@ TABLES["forces_full_pose"] = Table(
 )
 
 
-_WRIST_NOTE = (
+def _add_variant_tables(
+    name: str, title: str, columns: dict[str, str], label: str, run_key: str, note: str
+) -> None:
+    """TABLES[name] (the DMP alone and the run's SAC policy, mean and sampled, on task
+    variants given by path) and TABLES["forces_" + name] (the same rows' forces)."""
+    rows = [
+        Row("None / None (DMP alone), soft wrist", "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
+        *_mean_and_sampled(label, f"run:{run_key}", _PAPER_FULL_POSE_RLFD),
+    ]
+    TABLES[name] = Table(title, columns, rows, note)
+    TABLES[f"forces_{name}"] = Table(
+        f"Contact forces of the {name} table's rows: peak total contact force (N), mean "
+        "over episodes",
+        columns,
+        [replace(row, paper={}) for row in rows],
+        note,
+        metric="peak_force",
+    )
+
+
+_add_variant_tables(
+    "wrist",
+    "Table IV with a soft wrist: full pose at 20 N m/rad of rotational stiffness",
+    _SOFT_WRIST,
+    "SAC / SAC (rLfD), 4 updates per step, soft wrist",
+    "rlfd_gs4_soft_wrist",
     "The shipped tasks with the controller's rotational stiffness at 20 N m/rad instead "
     "of 150 (models/tasks/variants/*_soft_wrist.yaml; franka_ros's Cartesian impedance "
     "example offers 0-30 N m/rad). The paper's columns are its stiffness-unstated "
-    "physical robot, as in Table IV."
+    "physical robot, as in Table IV.",
 )
-_WRIST_ROWS = [
-    Row("None / None (DMP alone), soft wrist", "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
-    *_mean_and_sampled(
-        "SAC / SAC (rLfD), 4 updates per step, soft wrist",
-        "run:rlfd_gs4_soft_wrist",
-        _PAPER_FULL_POSE_RLFD,
-    ),
-]
-TABLES["wrist"] = Table(
-    "Table IV with a soft wrist: full pose at 20 N m/rad of rotational stiffness",
-    _SOFT_WRIST,
-    _WRIST_ROWS,
-    _WRIST_NOTE,
-)
-TABLES["forces_wrist"] = Table(
-    "Contact forces with a soft wrist (the wrist table's rows): peak total contact "
-    "force (N), mean over episodes",
-    _SOFT_WRIST,
-    [replace(row, paper={}) for row in _WRIST_ROWS],
-    _WRIST_NOTE,
-    metric="peak_force",
-)
-
-
-_SMOOTH_NOTE = (
+_add_variant_tables(
+    "wrist_smooth",
+    "Table IV with a soft wrist and a low-passed residual",
+    _SOFT_WRIST_SMOOTH,
+    "SAC / SAC (rLfD), soft wrist, low-passed residual",
+    "rlfd_gs4_soft_wrist_smooth",
     "The soft-wrist variants (20 N m/rad) with the residual low-passed (0.1 s) and, on peg "
     "and gear, 2 deg of rotation per residual unit instead of 5 "
     "(models/tasks/variants/*_soft_wrist_smooth*.yaml). The paper's columns are its "
-    "physical robot, as in Table IV."
-)
-_SMOOTH_ROWS = [
-    Row("None / None (DMP alone), soft wrist", "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
-    *_mean_and_sampled(
-        "SAC / SAC (rLfD), soft wrist, low-passed residual",
-        "run:rlfd_gs4_soft_wrist_smooth",
-        _PAPER_FULL_POSE_RLFD,
-    ),
-]
-TABLES["wrist_smooth"] = Table(
-    "Table IV with a soft wrist and a low-passed residual",
-    _SOFT_WRIST_SMOOTH,
-    _SMOOTH_ROWS,
-    _SMOOTH_NOTE,
-)
-TABLES["forces_wrist_smooth"] = Table(
-    "Contact forces with a soft wrist and a low-passed residual (the wrist_smooth "
-    "table's rows): peak total contact force (N), mean over episodes",
-    _SOFT_WRIST_SMOOTH,
-    [replace(row, paper={}) for row in _SMOOTH_ROWS],
-    _SMOOTH_NOTE,
-    metric="peak_force",
+    "physical robot, as in Table IV.",
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.
