@@ -412,7 +412,7 @@ def _cmd_seeds(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from rlfd_drake.evaluate import evaluate, evaluation_name, trained_mode, write_evaluation
-    from rlfd_drake.results import results_dir
+    from rlfd_drake.results import check_result_name, results_dir
 
     if args.residual_mode is None:
         args.residual_mode = trained_mode(args.policy)
@@ -420,8 +420,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise ValueError(f"--noise-scale {args.noise_scale} needs --stochastic")
     noise_scale = 1.0 if args.noise_scale is None else args.noise_scale
     name = args.name or evaluation_name(
-        args.task, args.policy, args.residual_mode, args.stochastic, args.seed, noise_scale
+        args.task,
+        args.policy,
+        args.residual_mode,
+        args.stochastic,
+        args.seed,
+        noise_scale,
+        args.episodes,
     )
+    check_result_name(name)
     existing = results_dir() / f"{name}.json"
     if existing.exists() and not args.overwrite:
         raise FileExistsError(f"{existing} exists; pass --overwrite or --name to keep both")
@@ -723,7 +730,11 @@ def build_parser() -> argparse.ArgumentParser:
         default="residual",
         help="how the policy was trained to act (see rlfd train --composition)",
     )
-    evaluate.add_argument("--name", help="results file stem")
+    evaluate.add_argument(
+        "--name",
+        help="results file stem (default: eval_<task>_<policy>[_<mode>][_stochastic]"
+        "_n<episodes>_s<seed>, the name rlfd reproduce looks for)",
+    )
     evaluate.add_argument(
         "--overwrite", action="store_true", help="replace an existing result of the same name"
     )

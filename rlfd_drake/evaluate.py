@@ -614,14 +614,18 @@ def evaluation_name(
     stochastic: bool,
     seed: int,
     noise_scale: float = 1.0,
+    episodes: int | None = None,
 ) -> str:
     """The results file stem ``rlfd evaluate`` gives an evaluation, e.g.
-    ``eval_peg_hard_<run folder>_translation_stochastic_s0`` (``..._stochastic0.5_s0``
-    with half the policy's noise)."""
+    ``eval_peg_hard_<run folder>_translation_stochastic_n40_s0`` (``..._stochastic0.5_...``
+    with half the policy's noise; no ``_n40`` without ``episodes``). A task given as a
+    YAML path is named by its file stem (a variant's name), as ``rlfd reproduce`` names
+    it, so that each reuses the other's files."""
     mode = "" if residual_mode == "full" else f"_{residual_mode}"
     if stochastic:
         mode += sampling_suffix(noise_scale)
-    return f"eval_{task}_{policy_stem(policy_spec)}{mode}_s{seed}"
+    count = "" if episodes is None else f"_n{episodes}"
+    return f"eval_{Path(task).stem}_{policy_stem(policy_spec)}{mode}{count}_s{seed}"
 
 
 def sampling_suffix(noise_scale: float = 1.0) -> str:

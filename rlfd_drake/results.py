@@ -45,6 +45,13 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
+def check_result_name(name: str) -> None:
+    """Raises a ValueError unless ``name`` is a plain file stem (no folder, no dot
+    first): checked before a measurement runs, not after."""
+    if not name or "/" in name or name.startswith("."):
+        raise ValueError(f"result name must be a plain file stem, got {name!r}")
+
+
 def write_result(
     name: str, data: dict, seed: int | None = None, command: str | None = None
 ) -> Path:
@@ -53,8 +60,7 @@ def write_result(
     The file is the record of a measurement: it is overwritten by a re-run of the same
     command (that is the point of a reproducible result), never by anything else.
     """
-    if not name or "/" in name or name.startswith("."):
-        raise ValueError(f"result name must be a plain file stem, got {name!r}")
+    check_result_name(name)
     record = {
         "command": command if command is not None else invoked_command(),
         "seed": seed,

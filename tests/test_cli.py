@@ -61,6 +61,27 @@ def test_evaluation_file_names_of_policy_specs():
         evaluation_name("peg", stem, "full", True, 0, noise_scale=0.5)
         == "eval_peg_peg_sac_s0_stochastic0.5_s0"
     )
+    # A variant given by path is named by its file stem, with the episode count as
+    # rlfd reproduce names its evaluations.
+    variant = "models/tasks/variants/gear_soft_wrist.yaml"
+    assert (
+        evaluation_name(variant, "dmp", "full", False, 0, episodes=40)
+        == "eval_gear_soft_wrist_dmp_n40_s0"
+    )
+
+
+def test_evaluate_checks_its_result_name_before_running(tmp_path, monkeypatch, capsys):
+    import rlfd_drake.evaluate
+
+    monkeypatch.chdir(tmp_path)
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("evaluated before the name was checked")
+
+    monkeypatch.setattr(rlfd_drake.evaluate, "evaluate", must_not_run)
+    argv = ["evaluate", "--policy", "dmp", "--episodes", "1", "--name", "sub/dir"]
+    assert main(argv) == 2
+    assert "result name must be a plain file stem, got 'sub/dir'" in capsys.readouterr().err
 
 
 def test_noise_scale_needs_stochastic(capsys):
@@ -70,7 +91,7 @@ def test_noise_scale_needs_stochastic(capsys):
 
 def test_evaluate_refuses_to_overwrite_a_stored_result(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    stored = tmp_path / "results" / "eval_peg_easy_dmp_translation_s0.json"
+    stored = tmp_path / "results" / "eval_peg_easy_dmp_translation_n1_s0.json"
     stored.parent.mkdir()
     stored.write_text("{}")
     argv = ["evaluate", "--policy", "dmp", "--episodes", "1", "--residual-mode", "translation"]
