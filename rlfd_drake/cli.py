@@ -328,6 +328,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         force_limit_penalty=args.force_limit_penalty,
         peak_force_cost=args.peak_force_cost,
         peak_force_threshold_n=args.peak_force_threshold_n,
+        action_cost=args.action_cost,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         # The default stays TrainConfig's (importing it here would load torch).
@@ -602,6 +603,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--peak-force-threshold-n",
         type=float,
         help="the peak low-passed contact force that --peak-force-cost starts at, N",
+    )
+    train.add_argument(
+        "--action-cost",
+        type=float,
+        default=0.0,
+        help="each training step pays this times the mean square of its action (default "
+        "0: the paper's sparse reward; pulls the residual to zero where the DMP suffices)",
     )
     train.add_argument(
         "--scaled-observation",

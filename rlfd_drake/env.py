@@ -106,6 +106,12 @@ def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
             raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
 
 
+def check_action_cost(cost: float) -> None:
+    """Raises a ValueError unless ``cost`` is a number >= 0."""
+    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
+        raise ValueError(f"action_cost must be a number >= 0, got {cost!r}")
+
+
 class RlfdEnv(DrakeGymEnv):
     """Residual Learning from Demonstration on one insertion task.
 
@@ -161,7 +167,9 @@ class RlfdEnv(DrakeGymEnv):
     (a step's reward loses ``cost * (e_t - e_(t-1))``, where ``e = max(0, F / threshold
     - 1)`` and F is the peak low-passed contact force so far: an episode pays ``cost``
     per threshold of peak force above the threshold that its residual steps added;
-    0 by default, the paper's reward), ``diagram_config`` (RlfdDiagramConfig),
+    0 by default, the paper's reward), ``action_cost`` (a step's reward loses
+    ``action_cost`` times the mean square of its clipped action: a residual that is
+    not needed costs; 0 by default, the paper's reward), ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
     """
@@ -181,6 +189,7 @@ class RlfdEnv(DrakeGymEnv):
         force_limit_penalty: float = 0.0,
         peak_force_cost: float = 0.0,
         peak_force_threshold_n: float | None = None,
+        action_cost: float = 0.0,
     ) -> None:
         self._init_args = dict(
             task=task,
@@ -190,6 +199,7 @@ class RlfdEnv(DrakeGymEnv):
             force_limit_penalty=force_limit_penalty,
             peak_force_cost=peak_force_cost,
             peak_force_threshold_n=peak_force_threshold_n,
+            action_cost=action_cost,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -203,6 +213,8 @@ class RlfdEnv(DrakeGymEnv):
         if info_handler is not None and not callable(info_handler):
             raise ValueError("info_handler must be callable(simulator) -> dict")
         check_force_terms(force_limit_penalty, peak_force_cost, peak_force_threshold_n)
+        check_action_cost(action_cost)
+        self.action_cost = float(action_cost)
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)
         self.peak_force_cost = float(peak_force_cost)
@@ -373,7 +385,8 @@ class RlfdEnv(DrakeGymEnv):
         if self._failure_reason is not None:
             raise RuntimeError("step() after a solver failure: call reset()")
         context = self.simulator.get_mutable_context()
-        self.action_port.FixValue(context, np.clip(action, -1.0, 1.0))
+        action = np.clip(action, -1.0, 1.0)
+        self.action_port.FixValue(context, action)
         try:
             self.simulator.AdvanceTo(context.get_time() + self.time_step)
         except RuntimeError as error:
@@ -388,6 +401,8 @@ class RlfdEnv(DrakeGymEnv):
             error, _ = self._part_error()
             l1 = float(np.sum(np.abs(error)))
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
+        if self.action_cost > 0.0:
+            reward -= self.action_cost * float(np.mean(np.square(action)))
         # Force limits and costs apply to the low-passed contact force (ObserverConfig).
         peak_n = self._peak_low_passed_force()
         if self.peak_force_cost > 0.0:

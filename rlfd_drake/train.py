@@ -38,7 +38,13 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFram
 
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
-from rlfd_drake.env import ENV_IDS, AppliedResidualAction, RlfdEnv, check_force_terms
+from rlfd_drake.env import (
+    ENV_IDS,
+    AppliedResidualAction,
+    RlfdEnv,
+    check_action_cost,
+    check_force_terms,
+)
 from rlfd_drake.observation_scaling import (
     CONTACT_TORQUE_PER_UNIT_NM,
     ScaledObservation,
@@ -115,6 +121,9 @@ class TrainConfig:
             added (``RlfdEnv``); 0 / None = the paper's sparse reward. Unlike a force
             limit, the episode goes on, so a forceful success still scores above a
             failure and exploration keeps its successes.
+        action_cost: each training step pays this times the mean square of its
+            action (``RlfdEnv``): where the DMP alone inserts, the residual is pulled
+            toward zero; 0 = the paper's sparse reward.
     """
 
     task: str = "peg_easy"
@@ -143,6 +152,7 @@ class TrainConfig:
     force_limit_penalty: float = 0.0
     peak_force_cost: float = 0.0
     peak_force_threshold_n: float | None = None
+    action_cost: float = 0.0
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
@@ -208,6 +218,7 @@ class TrainConfig:
         check_force_terms(
             self.force_limit_penalty, self.peak_force_cost, self.peak_force_threshold_n
         )
+        check_action_cost(self.action_cost)
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
@@ -222,6 +233,7 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "force_limit_penalty": config.force_limit_penalty,
         "peak_force_cost": config.peak_force_cost,
         "peak_force_threshold_n": config.peak_force_threshold_n,
+        "action_cost": config.action_cost,
     }
 
 

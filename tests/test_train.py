@@ -286,6 +286,33 @@ def test_peak_force_cost_is_validated():
         RlfdEnv("peg_easy", peak_force_cost=float("nan"))
 
 
+def test_action_cost_charges_each_step_its_mean_square_action():
+    """--action-cost C: a step's reward is the paper's minus C times the mean square of
+    the clipped action (an action of 2 costs as 1); the simulation is the same."""
+    from rlfd_drake.train import _env_kwargs
+
+    options = {"start_dp": np.zeros(3), "start_dq": np.array([1.0, 0.0, 0.0, 0.0])}
+    action = np.array([0.5, -2.0, 0.0, 0.0, 0.0, 0.0], np.float32)
+
+    def first_steps(**cost) -> tuple[list[float], np.ndarray]:
+        env = RlfdEnv(**_env_kwargs(TrainConfig(task="peg_easy", **cost)))
+        env.reset(seed=0, options=options)
+        steps = [env.step(action) for _ in range(3)]
+        return [step[1] for step in steps], steps[-1][0]
+
+    paper, paper_observation = first_steps()
+    charged, charged_observation = first_steps(action_cost=0.3)
+    np.testing.assert_array_equal(charged_observation, paper_observation)
+    mean_square = (0.5**2 + 1.0**2) / 6
+    for p, c in zip(paper, charged, strict=True):
+        assert p - c == pytest.approx(0.3 * mean_square, rel=1e-9)
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(
+            ValueError, match=re.escape(f"action_cost must be a number >= 0, got {bad}")
+        ):
+            TrainConfig(action_cost=bad)
+
+
 def test_deployed_policy_matches_the_frame_stacked_training_view():
     from stable_baselines3.common.vec_env import VecFrameStack
 
