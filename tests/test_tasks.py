@@ -217,3 +217,17 @@ def test_soft_wrist_variants_change_only_the_stiffness():
             == shipped
         )
         assert evaluation_size(variant) == evaluation_size(shipped)
+
+
+def test_every_variant_loads_and_is_named_by_its_file():
+    """Evaluations of a variant given by path are named by its file stem (``rlfd
+    evaluate``, ``rlfd reproduce``): each variant's name must be that stem, and each
+    differs from its shipped task in fields the task format has."""
+    variants = sorted((tasks_dir() / "variants").glob("*.yaml"))
+    assert len(variants) >= 10
+    for path in variants:
+        variant = load_task(path)
+        assert variant.name == path.stem, path
+        shipped = load_task(path.stem.split("_")[0], check_demo=False)
+        assert variant.demo == shipped.demo
+        assert evaluation_size(variant) == evaluation_size(shipped)
