@@ -53,6 +53,12 @@ from rlfd_drake.view import (
 RESIDUAL_SIZE = 6
 
 
+#: The controller gains a task may set: each TaskSpec field (a scalar, or None for the
+#: controller's own) sets the CartesianImpedanceConfig field of the same name on all
+#: three axes.
+_TASK_GAINS = ("rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m")
+
+
 @dataclass
 class RlfdDiagramConfig:
     """Rates and gains of the rLfD diagram (the paper's by default).
@@ -127,15 +133,13 @@ class RlfdDiagramConfig:
 
     def impedance_for(self, task: TaskSpec) -> CartesianImpedanceConfig:
         """The controller's gains on ``task``: this config's, with the task's rotational
-        and translational stiffness where the task sets them."""
-        gains = self.impedance
-        if task.rotational_stiffness_Nm_per_rad is not None:
-            stiffness = task.rotational_stiffness_Nm_per_rad
-            gains = replace(gains, rotational_stiffness_Nm_per_rad=(stiffness,) * 3)
-        if task.translational_stiffness_N_per_m is not None:
-            stiffness = task.translational_stiffness_N_per_m
-            gains = replace(gains, translational_stiffness_N_per_m=(stiffness,) * 3)
-        return gains
+        and translational stiffness where the task sets them (``_TASK_GAINS``)."""
+        overrides = {
+            name: (getattr(task, name),) * 3
+            for name in _TASK_GAINS
+            if getattr(task, name) is not None
+        }
+        return replace(self.impedance, **overrides) if overrides else self.impedance
 
 
 @dataclass

@@ -81,21 +81,25 @@ def _vector_option(options: dict, key: str, size: int, default: np.ndarray) -> n
     return value
 
 
-def check_force_terms(
-    force_limit_penalty: float, peak_force_cost: float, peak_force_threshold_n: float | None
+def _check_non_negative(value: float, name: str) -> None:
+    if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+
+
+def check_reward_terms(
+    force_limit_penalty: float,
+    peak_force_cost: float,
+    peak_force_threshold_n: float | None,
+    action_cost: float = 0.0,
 ) -> None:
-    """Raises a ValueError naming the field unless the reward's force terms are valid:
-    ``force_limit_penalty`` >= 0 and see :func:`check_peak_force_cost`."""
-    if not (np.isfinite(force_limit_penalty) and force_limit_penalty >= 0):
-        raise ValueError(f"force_limit_penalty must be a number >= 0, got {force_limit_penalty}")
-    check_peak_force_cost(peak_force_cost, peak_force_threshold_n)
-
-
-def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
-    """Raises a ValueError unless ``cost`` >= 0 and, with a cost, ``threshold_n`` > 0
-    (a threshold without a cost is refused too: it would do nothing)."""
-    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
-        raise ValueError(f"peak_force_cost must be a number >= 0, got {cost!r}")
+    """Raises a ValueError naming the field unless the reward's extra terms are valid:
+    ``force_limit_penalty``, ``peak_force_cost`` and ``action_cost`` >= 0, and a peak
+    force cost with a threshold > 0 (a threshold without a cost is refused too: it
+    would do nothing)."""
+    _check_non_negative(force_limit_penalty, "force_limit_penalty")
+    _check_non_negative(action_cost, "action_cost")
+    _check_non_negative(peak_force_cost, "peak_force_cost")
+    cost, threshold_n = peak_force_cost, peak_force_threshold_n
     if cost > 0 and threshold_n is None:
         raise ValueError(f"peak_force_cost {cost} needs peak_force_threshold_n")
     if threshold_n is not None:
@@ -104,12 +108,6 @@ def check_peak_force_cost(cost: float, threshold_n: float | None) -> None:
         finite = isinstance(threshold_n, int | float) and np.isfinite(threshold_n)
         if not (finite and threshold_n > 0):
             raise ValueError(f"peak_force_threshold_n must be a number > 0, got {threshold_n!r}")
-
-
-def check_action_cost(cost: float) -> None:
-    """Raises a ValueError unless ``cost`` is a number >= 0."""
-    if not (isinstance(cost, int | float) and np.isfinite(cost) and cost >= 0):
-        raise ValueError(f"action_cost must be a number >= 0, got {cost!r}")
 
 
 class RlfdEnv(DrakeGymEnv):
@@ -212,8 +210,9 @@ class RlfdEnv(DrakeGymEnv):
             raise ValueError(f"render_mode must be None, 'ansi' or 'human', got {render_mode!r}")
         if info_handler is not None and not callable(info_handler):
             raise ValueError("info_handler must be callable(simulator) -> dict")
-        check_force_terms(force_limit_penalty, peak_force_cost, peak_force_threshold_n)
-        check_action_cost(action_cost)
+        check_reward_terms(
+            force_limit_penalty, peak_force_cost, peak_force_threshold_n, action_cost
+        )
         self.action_cost = float(action_cost)
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)

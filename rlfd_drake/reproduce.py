@@ -187,12 +187,23 @@ RUNS["rlfd_gs4"] = {
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
-RUNS["rlfd_gs4_soft_wrist"] = {
-    path: _run(
-        f"runs/{task}_soft_wrist_sac_gs4_s0", path, _FULL_POSE_EPISODES[task], _SAC_GS4_FLAGS[task]
-    )
-    for task, path in _SOFT_WRIST.items()
-}
+
+
+def _variant_runs(variants: dict[str, str]) -> dict[str, tuple[str, str]]:
+    """Table IV's 4-update full-pose SAC recipe, unchanged, on each task's variant
+    (task -> YAML path): RUNS entries keyed by path, folders named by the variant."""
+    return {
+        path: _run(
+            f"runs/{Path(path).stem}_sac_gs4_s0",
+            path,
+            _FULL_POSE_EPISODES[task],
+            _SAC_GS4_FLAGS[task],
+        )
+        for task, path in variants.items()
+    }
+
+
+RUNS["rlfd_gs4_soft_wrist"] = _variant_runs(_SOFT_WRIST)
 # The soft wrist with a low-passed residual and 2 deg per unit on peg and gear (RJ-45's
 # range is 3 deg already): the gear recipe of results/wrist_stiffness_study.md, section 3.
 _SOFT_WRIST_SMOOTH = {
@@ -200,12 +211,7 @@ _SOFT_WRIST_SMOOTH = {
     "gear": "models/tasks/variants/gear_soft_wrist_smooth_rot2deg.yaml",
     "rj45": "models/tasks/variants/rj45_soft_wrist_smooth.yaml",
 }
-RUNS["rlfd_gs4_soft_wrist_smooth"] = {
-    path: _run(
-        f"runs/{Path(path).stem}_sac_gs4_s0", path, _FULL_POSE_EPISODES[task], _SAC_GS4_FLAGS[task]
-    )
-    for task, path in _SOFT_WRIST_SMOOTH.items()
-}
+RUNS["rlfd_gs4_soft_wrist_smooth"] = _variant_runs(_SOFT_WRIST_SMOOTH)
 # Table IV's PPO / None: translation-only residuals (300 episodes: what fits a session;
 # the paper trains 500).
 RUNS["ppo_translation"] = {

@@ -42,8 +42,7 @@ from rlfd_drake.env import (
     ENV_IDS,
     AppliedResidualAction,
     RlfdEnv,
-    check_action_cost,
-    check_force_terms,
+    check_reward_terms,
 )
 from rlfd_drake.observation_scaling import (
     CONTACT_TORQUE_PER_UNIT_NM,
@@ -215,10 +214,12 @@ class TrainConfig:
             )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
-        check_force_terms(
-            self.force_limit_penalty, self.peak_force_cost, self.peak_force_threshold_n
+        check_reward_terms(
+            self.force_limit_penalty,
+            self.peak_force_cost,
+            self.peak_force_threshold_n,
+            self.action_cost,
         )
-        check_action_cost(self.action_cost)
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
