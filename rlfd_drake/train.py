@@ -50,7 +50,7 @@ from rlfd_drake.observation_scaling import (
     contact_scales,
 )
 from rlfd_drake.policies import load_sb3_model
-from rlfd_drake.results import invoked_command, utc_now
+from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.tasks import load_task
 
 ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
@@ -514,7 +514,7 @@ def train(
                 f"saved {saved}, given {asdict(config)}"
             )
     config_path.write_text(
-        json.dumps({"config": asdict(config), "command": invoked_command()}, indent=2) + "\n"
+        format_json({"config": asdict(config), "command": invoked_command()}) + "\n"
     )
     episodes_csv = run_dir / "episodes.csv"
     episodes_done = 0
@@ -579,5 +579,5 @@ def train(
         "success_rate_all": float(np.mean(log.successes)) if log.successes else 0.0,
         "date": utc_now(),  # when training finished
     }
-    (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    (run_dir / "metrics.json").write_text(format_json(metrics) + "\n")
     return metrics
