@@ -213,6 +213,12 @@ class EpisodeResult:
         sim_time_s: simulated time reached, s.
         wall_time_s: wall-clock time of the episode (build, IK, simulation), s.
         bin_index: the spec's bin index.
+        peak_force_time_s: when the peak total contact force was felt, s (the first
+            log sample, every ``log_period_s``, at which the running peak had its final
+            value: up to one log period late); nan if never simulated or never in contact.
+        peak_force_distance_m: the part's distance to the true goal at that time, m:
+            a peak near 0 is felt on reaching the bottom, one at the entrance's height
+            on landing or searching there.
     """
 
     success: bool
@@ -228,6 +234,8 @@ class EpisodeResult:
     sim_time_s: float
     wall_time_s: float
     bin_index: int
+    peak_force_time_s: float = float("nan")
+    peak_force_distance_m: float = float("nan")
 
     @property
     def failure_kind(self) -> str | None:
@@ -333,6 +341,8 @@ def run_episode(
             sim_time_s=float(context.get_time()),
             wall_time_s=time.perf_counter() - wall_start,
             bin_index=spec.bin_index,
+            peak_force_time_s=metrics.get("peak_force_time_s", nan),
+            peak_force_distance_m=metrics.get("peak_force_distance_m", nan),
         )
 
     X_WP_start = PoseFromOffset(
@@ -395,7 +405,17 @@ def run_episode(
     else:
         # Within kappa only between log samples: the end of the chunk that latched it.
         insertion_time = nan if latched_at is None else latched_at
+    force_log = rlfd.logs["force_metrics"].FindLog(context)
+    peak_time, peak_distance = _when_peaked(
+        force_log.sample_times(),
+        force_log.data()[0],
+        float(forces[0]),
+        log.sample_times(),
+        distances,
+    )
     metrics = {
+        "peak_force_time_s": peak_time,
+        "peak_force_distance_m": peak_distance,
         "insertion_time_s": insertion_time,
         "peak_force_n": float(forces[0]),
         "mean_force_n": float(forces[1]),
@@ -413,7 +433,6 @@ def run_episode(
     if failure is not None:
         return result(failure, False, **metrics)
     if force_limit_broken:
-        force_log = rlfd.logs["force_metrics"].FindLog(context)
         broken = np.flatnonzero(force_log.data()[3] > task.force_limit_n)
         k = int(broken[0]) if broken.size else -1
         when = (
@@ -428,6 +447,25 @@ def run_episode(
         angle = metrics["final_angle_deg"]
         return result(f"orientation: {angle:.1f} deg > {task.kappa_deg:g} deg", False, **metrics)
     return result(None, True, **metrics)
+
+
+def _when_peaked(
+    times: np.ndarray,
+    running_peak: np.ndarray,
+    peak: float,
+    distance_times: np.ndarray,
+    distances: np.ndarray,
+) -> tuple[float, float]:
+    """(time, distance to goal) of the first log sample whose running peak force is the
+    episode's ``peak``; (nan, nan) without samples or without contact. A peak felt
+    after the last sample is dated at the last sample."""
+    if times.size == 0 or peak <= 0.0:
+        return float("nan"), float("nan")
+    reached = np.flatnonzero(running_peak >= peak - 1e-9)
+    k = int(reached[0]) if reached.size else times.size - 1
+    t = float(times[k])
+    distance = float(np.interp(t, distance_times, distances)) if distances.size else float("nan")
+    return t, distance
 
 
 def _first_line(error: BaseException) -> str:

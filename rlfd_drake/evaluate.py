@@ -236,6 +236,11 @@ def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
     return index, result
 
 
+def _rounded_or_none(value: float, digits: int) -> float | None:
+    """``round(value, digits)``, or None for nan (JSON has no nan)."""
+    return None if math.isnan(value) else round(value, digits)
+
+
 def _binomial_std(p: float, n: int) -> float:
     return math.sqrt(p * (1.0 - p) / n) if n > 0 else float("nan")
 
@@ -336,6 +341,10 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "peak_force_n": [round(r.peak_force_n, 2) for r in results],
         "peak_joint_contact_torque_nm": [round(r.peak_joint_contact_torque_nm, 2) for r in results],
         "peak_low_passed_force_n": [round(r.peak_low_passed_force_n, 2) for r in results],
+        "peak_force_time_s": [_rounded_or_none(r.peak_force_time_s, 2) for r in results],
+        "peak_force_distance_mm": [
+            _rounded_or_none(1e3 * r.peak_force_distance_m, 2) for r in results
+        ],
         "failure": [r.failure_reason for r in results],
     }
     return {
@@ -521,9 +530,49 @@ def evaluation_markdown(result: dict) -> str:
             f"| {group['from_mm']:g} to {group['to_mm']:g} | {group['n']} | "
             f"{_fmt(group['success_rate'], 100)} |"
         )
+    lines += _peak_force_lines(r["episode_table"])
     failures = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "none"
     lines += ["", f"Failures: {failures}. Wall time {r['wall_time_s']:.0f} s.", ""]
     return "\n".join(lines)
+
+
+#: A peak felt this close to the goal was felt at the bottom of the insertion, m.
+_AT_THE_BOTTOM_M = 1e-3
+
+
+def _peak_force_lines(table: dict) -> list[str]:
+    """Markdown lines: where the episodes' peak contact forces were felt, for successes
+    and failures (none for evaluations stored before the table had those columns)."""
+    if "peak_force_distance_mm" not in table:
+        return []
+    lines = [
+        "",
+        "| peak force felt | n | mean peak N | median time s | median distance to goal mm "
+        "| at the bottom (< 1 mm) |",
+        "|---|---|---|---|---|---|",
+    ]
+    success = np.asarray(table["success"], dtype=bool)
+    for label, mask in (("successes", success), ("failures", ~success)):
+        rows = [
+            (force, time, distance)
+            for force, time, distance, chosen in zip(
+                table["peak_force_n"],
+                table["peak_force_time_s"],
+                table["peak_force_distance_mm"],
+                mask,
+                strict=True,
+            )
+            if chosen and time is not None and distance is not None
+        ]
+        if not rows:
+            continue
+        force, time, distance = np.array(rows, dtype=float).T
+        bottom = int(np.sum(distance < 1e3 * _AT_THE_BOTTOM_M))
+        lines.append(
+            f"| {label} | {len(rows)} | {force.mean():.1f} | {np.median(time):.2f} | "
+            f"{np.median(distance):.1f} | {bottom} |"
+        )
+    return lines
 
 
 def _success_curve(result: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:

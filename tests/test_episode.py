@@ -49,6 +49,9 @@ def test_dmp_alone_inserts_from_the_demo_start(peg_easy, nominal_result):
     assert r.final_distance_m <= peg_easy.kappa_m
     assert r.final_angle_deg < 1.0
     assert r.peak_force_n > 1.0  # the peg touched the hole floor
+    # ... and that is where the peak was felt: at the bottom, after reaching kappa.
+    assert r.insertion_time_s <= r.peak_force_time_s <= r.sim_time_s
+    assert r.peak_force_distance_m < 1e-3
     assert 0.0 <= r.mean_force_n <= r.peak_force_n
     assert r.peak_joint_contact_torque_nm > 0.0
     assert not r.force_limit_broken
@@ -80,6 +83,28 @@ def test_large_fixture_error_fails_on_the_entrance(peg_easy, dmp):
     assert r.final_distance_m > 0.03  # resting on top of a 40 mm deep hole
     assert r.sim_time_s == pytest.approx(7.5)
     assert r.peak_force_n > 1.0
+    assert r.peak_force_distance_m > 0.03  # the peak was the landing on the wall
+
+
+def test_when_peaked_dates_the_first_sample_holding_the_final_peak():
+    times = np.array([0.0, 0.01, 0.02, 0.03])
+    running_peak = np.array([0.0, 5.0, 9.0, 9.0])
+    distances = np.array([0.04, 0.03, 0.02, 0.01])
+    assert episode_module._when_peaked(times, running_peak, 9.0, times, distances) == (
+        0.02,
+        0.02,
+    )
+    # Felt after the last sample: dated at the last sample.
+    assert episode_module._when_peaked(times, running_peak, 12.0, times, distances) == (
+        0.03,
+        0.01,
+    )
+    nan_time, nan_distance = episode_module._when_peaked(
+        np.array([]), np.array([]), 1.0, np.array([]), np.array([])
+    )
+    assert math.isnan(nan_time) and math.isnan(nan_distance)
+    no_contact = episode_module._when_peaked(times, np.zeros(4), 0.0, times, distances)
+    assert all(map(math.isnan, no_contact))
 
 
 def test_force_limit_stops_and_fails(peg_easy, dmp):

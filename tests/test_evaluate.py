@@ -13,6 +13,7 @@ from rlfd_drake.evaluate import (
     RESULT_KEYS,
     _success_curve,
     evaluate,
+    evaluation_markdown,
     make_policy,
     success_by_fixture_error,
     write_evaluation,
@@ -54,6 +55,12 @@ def test_evaluate_returns_the_documented_keys(dmp_result):
     assert np.mean(torques) == pytest.approx(r["peak_joint_contact_torque_nm"], abs=0.01)
     # Low-passing can only lower a peak.
     assert 0.0 < r["peak_low_passed_force_n"] <= r["peak_force_n"]
+    # Each episode dates its peak, within the simulated time, at a distance to the goal.
+    table = r["episode_table"]
+    for when, distance in zip(
+        table["peak_force_time_s"], table["peak_force_distance_mm"], strict=True
+    ):
+        assert 0.0 <= when <= 10.0 and 0.0 <= distance < 400.0
     assert r["wall_time_s"] > 0.0
     json.dumps(r)  # JSON-serialisable as is
 
@@ -74,6 +81,11 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
     markdown = paths["md"].read_text()
     assert "| task | policy | success % |" in markdown and "peg_easy" in markdown
     assert "| unseen fixture error mm | n | success % |" in markdown
+    assert "| peak force felt | n | mean peak N | median time s |" in markdown
+    # Evaluations stored before episodes dated their peaks still render, without it.
+    old = {**dmp_result, "episode_table": dict(dmp_result["episode_table"])}
+    del old["episode_table"]["peak_force_time_s"], old["episode_table"]["peak_force_distance_mm"]
+    assert "peak force felt" not in evaluation_markdown(old)
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"
     assert all(p.stat().st_size < 100_000 for p in paths.values())
     from PIL import Image
