@@ -242,25 +242,46 @@ RUNS["from_source_60"] = {
     )
     for task, source in (("gear", "rj45"), ("rj45", "gear"))
 }
+
+
 # Table VI with Table IV's 4-update SAC residuals. A fine-tune warms its replay buffer
 # with the copied policy's own 1000 steps first: updating from the first step wrecked
 # the copied gear policy (results/full_pose_study.md).
-_TRANSFER_PAIRS = (("gear", "rj45"), ("rj45", "gear"))
-RUNS["sac_source_as_is"] = {task: RUNS["rlfd_gs4"][source] for task, source in _TRANSFER_PAIRS}
-RUNS["sac_scratch_60"] = {
-    task: _run(f"runs/{task}_sac_gs4_scratch_e60_s0", task, 60, _SAC_GS4_FLAGS[task])
-    for task, _ in _TRANSFER_PAIRS
-}
-RUNS["sac_from_source_60"] = {
-    task: _run(
-        f"runs/{task}_sac_gs4_from_{source}_e60_s0",
-        task,
-        60,
-        f"{_SAC_GS4_RECIPE} --sac-learning-starts 1000 "
-        f"--init-from {RUNS['rlfd_gs4'][source][0]}/policy.zip",
-    )
-    for task, source in _TRANSFER_PAIRS
-}
+def _add_sac_transfer_runs(suffix: str, full_runs: str, gear: str, rj45: str) -> None:
+    """RUNS["sac_source_as_is" + suffix], ["sac_scratch_60" + suffix] and
+    ["sac_from_source_60" + suffix]: Table VI's SAC rows between ``gear`` and ``rj45``
+    (task names or variant YAML paths), from the full runs RUNS[full_runs]."""
+    pairs = ((gear, rj45, "gear"), (rj45, gear, "rj45"))
+    RUNS[f"sac_source_as_is{suffix}"] = {
+        target: RUNS[full_runs][source] for target, source, _ in pairs
+    }
+    RUNS[f"sac_scratch_60{suffix}"] = {
+        target: _run(
+            f"runs/{Path(target).stem}_sac_gs4_scratch_e60_s0", target, 60, _SAC_GS4_FLAGS[task]
+        )
+        for target, _, task in pairs
+    }
+    RUNS[f"sac_from_source_60{suffix}"] = {
+        target: _run(
+            f"runs/{Path(target).stem}_sac_gs4_from_{Path(source).stem}_e60_s0",
+            target,
+            60,
+            f"{_SAC_GS4_RECIPE} --sac-learning-starts 1000 "
+            f"--init-from {RUNS[full_runs][source][0]}/policy.zip",
+        )
+        for target, source, _ in pairs
+    }
+
+
+_add_sac_transfer_runs("", "rlfd_gs4", "gear", "rj45")
+# The same between the soft-wrist, low-passed variants, where full training inserts
+# 100 % of gear starts with its mean action (results/table_wrist_smooth.md).
+_add_sac_transfer_runs(
+    "_soft_wrist_smooth",
+    "rlfd_gs4_soft_wrist_smooth",
+    _SOFT_WRIST_SMOOTH["gear"],
+    _SOFT_WRIST_SMOOTH["rj45"],
+)
 
 
 def _mean_and_sampled(
@@ -282,6 +303,24 @@ _SHIPPED_SAC = Row(
     {"easy": 94.8, "hard": 55.0},
     residual_mode="translation",
 )
+
+
+def _sac_transfer_rows(label: str, full_runs: str, suffix: str) -> list[Row]:
+    """Table VI's SAC rows (mean action and sampled) from the runs that
+    :func:`_add_sac_transfer_runs` named with ``suffix``."""
+    return [
+        row
+        for what, key, paper in (
+            ("full training on the target", full_runs, (92.2, 70.6)),
+            ("source policy as is", f"sac_source_as_is{suffix}", (85.4, 54.5)),
+            ("60 episodes from scratch", f"sac_scratch_60{suffix}", (70.3, 59.1)),
+            ("60 episodes from the source", f"sac_from_source_60{suffix}", (92.0, 70.6)),
+        )
+        for row in _mean_and_sampled(
+            f"{label}: {what}", f"run:{key}", dict(zip(("gear", "rj45"), paper, strict=True))
+        )
+    ]
+
 
 TABLES: dict[str, Table] = {
     "1": Table(
@@ -434,20 +473,7 @@ TABLES: dict[str, Table] = {
             Row("source policy as is", "run:source_as_is", {"gear": 85.4, "rj45": 54.5}),
             Row("60 episodes from scratch", "run:scratch_60", {"gear": 70.3, "rj45": 59.1}),
             Row("60 episodes from the source", "run:from_source_60", {"gear": 92.0, "rj45": 70.6}),
-            *(
-                row
-                for label, key, paper in (
-                    ("full training on the target", "rlfd_gs4", (92.2, 70.6)),
-                    ("source policy as is", "sac_source_as_is", (85.4, 54.5)),
-                    ("60 episodes from scratch", "sac_scratch_60", (70.3, 59.1)),
-                    ("60 episodes from the source", "sac_from_source_60", (92.0, 70.6)),
-                )
-                for row in _mean_and_sampled(
-                    f"SAC, 4 updates per step: {label}",
-                    f"run:{key}",
-                    dict(zip(("gear", "rj45"), paper, strict=True)),
-                )
-            ),
+            *_sac_transfer_rows("SAC, 4 updates per step", "rlfd_gs4", ""),
         ],
         "Source of gear = the RJ-45 policy and back. The paper's 60 episodes are 3 PPO "
         "updates; here PPO updates every 512 steps (about 10 gear or 35 RJ-45 episodes). "
@@ -548,6 +574,23 @@ _add_variant_tables(
     "and gear, 2 deg of rotation per residual unit instead of 5 "
     "(models/tasks/variants/*_soft_wrist_smooth*.yaml). The paper's columns are its "
     "physical robot, as in Table IV.",
+)
+
+TABLES["6_wrist_smooth"] = Table(
+    "Table VI between the soft-wrist, low-passed variants of gear and RJ-45 (full-pose SAC)",
+    {"gear": _SOFT_WRIST_SMOOTH["gear"], "rj45": _SOFT_WRIST_SMOOTH["rj45"]},
+    [
+        Row("DMP alone, soft wrist", "dmp", {"gear": 41.5, "rj45": 0.0}),
+        *_sac_transfer_rows(
+            "SAC, soft wrist, low-passed", "rlfd_gs4_soft_wrist_smooth", "_soft_wrist_smooth"
+        ),
+    ],
+    "Table VI's SAC rows between models/tasks/variants/gear_soft_wrist_smooth_rot2deg.yaml "
+    "and rj45_soft_wrist_smooth.yaml (Table IV with a soft wrist and a low-passed residual: "
+    "20 N m/rad, 0.1 s; 2 deg per residual unit on gear). Source of gear = the RJ-45 "
+    "policy and back; the fine-tunes start updating after 1000 steps of the copied "
+    "policy. A residual of 1 is 1 cm / 2 deg on gear and 3 mm / 3 deg on RJ-45, so a "
+    "copied policy's actions change size. The paper's columns are its physical robot.",
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.

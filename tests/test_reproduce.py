@@ -384,21 +384,39 @@ def test_the_wrist_tables_evaluate_the_variants(tmp_path, monkeypatch, table, va
     assert "--sac-gradient-steps 4" in reason
 
 
-def test_the_sac_transfer_rows_fine_tune_the_other_tasks_policy():
-    """Table VI's SAC rows: the source is the other task's 4-update SAC policy, its
-    fine-tune warms up on 1000 steps of the copied policy, and every 60-episode run
-    keeps the full run's recipe."""
+_SMOOTH_PATHS = {t: f"models/tasks/variants/{v}.yaml" for t, v in _SMOOTH_VARIANTS.items()}
+
+
+@pytest.mark.parametrize(
+    "suffix, full, table, tasks, label",
+    [
+        ("", "rlfd_gs4", "6", {"gear": "gear", "rj45": "rj45"}, "SAC, 4 updates per step"),
+        (
+            "_soft_wrist_smooth",
+            "rlfd_gs4_soft_wrist_smooth",
+            "6_wrist_smooth",
+            {t: _SMOOTH_PATHS[t] for t in ("gear", "rj45")},
+            "SAC, soft wrist, low-passed",
+        ),
+    ],
+)
+def test_the_sac_transfer_rows_fine_tune_the_other_tasks_policy(suffix, full, table, tasks, label):
+    """Table VI's SAC rows (shipped tasks and soft-wrist variants): the source is the
+    other task's 4-update SAC policy, its fine-tune warms up on 1000 steps of the copied
+    policy, and every 60-episode run keeps the full run's recipe in its own folder."""
     runs = reproduce.RUNS
-    for task, source in (("gear", "rj45"), ("rj45", "gear")):
-        source_folder, source_command = runs["rlfd_gs4"][source]
-        assert runs["sac_source_as_is"][task][0] == source_folder
-        folder, command = runs["sac_from_source_60"][task]
-        assert f"--task {task} " in command and "--episodes 60 " in command
+    for target, source in ((tasks["gear"], tasks["rj45"]), (tasks["rj45"], tasks["gear"])):
+        source_folder, source_command = runs[full][source]
+        assert runs[f"sac_source_as_is{suffix}"][target][0] == source_folder
+        folder, command = runs[f"sac_from_source_60{suffix}"][target]
+        assert f"--task {target} " in command and "--episodes 60 " in command
         assert f"--init-from {source_folder}/policy.zip" in command
         assert "--sac-learning-starts 1000" in command and "--sac-gradient-steps 4" in command
-        scratch = runs["sac_scratch_60"][task][1]
+        assert folder.startswith(f"runs/{Path(target).stem}_sac_gs4_from_{Path(source).stem}")
+        scratch_folder, scratch = runs[f"sac_scratch_60{suffix}"][target]
         assert "--init-from" not in scratch and "--episodes 60 " in scratch
-        full_recipe = runs["rlfd_gs4"][task][1].split("--episodes")[1].split("--out")[0]
+        assert scratch_folder == f"runs/{Path(target).stem}_sac_gs4_scratch_e60_s0"
+        full_recipe = runs[full][target][1].split("--episodes")[1].split("--out")[0]
         assert full_recipe.replace(" 300 ", " 60 ").replace(" 500 ", " 60 ") in scratch
-    labels = [row.label for row in reproduce.TABLES["6"].rows]
-    assert "SAC, 4 updates per step: 60 episodes from the source, sampled actions" in labels
+    labels = [row.label for row in reproduce.TABLES[table].rows]
+    assert f"{label}: 60 episodes from the source, sampled actions" in labels
