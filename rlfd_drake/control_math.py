@@ -250,7 +250,11 @@ def pad_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
 
 
 def scale_residual(
-    residual: np.ndarray, max_translation_m: float, max_rotation_rad: float, mode: str = "full"
+    residual: np.ndarray,
+    max_translation_m: float,
+    max_rotation_rad: float,
+    mode: str = "full",
+    max_push_m: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Maps a normalised residual action to a physical pose correction.
 
@@ -262,6 +266,8 @@ def scale_residual(
         max_rotation_rad: rotation-vector component per unit action, rad.
         mode: one of ``RESIDUAL_MODES``; "translation" zeroes the rotation,
             "orientation" the translation, "off" both.
+        max_push_m: if given, the translation's world -z component (down, into the
+            fixtures) is at most this, m (>= 0); None = ``max_translation_m``.
 
     Returns:
         (dp (3,) m, rotation vector (3,) rad), world frame.
@@ -270,6 +276,8 @@ def scale_residual(
         raise ValueError(f"residual mode must be one of {RESIDUAL_MODES}, got {mode!r}")
     a = np.clip(np.asarray(residual, dtype=float).reshape(6), -1.0, 1.0)
     dp = a[:3] * max_translation_m if mode in ("full", "translation") else np.zeros(3)
+    if max_push_m is not None:
+        dp[2] = max(dp[2], -max_push_m)
     if mode in ("full", "orientation"):
         rotvec = a[3:] * max_rotation_rad
         alpha = float(np.sqrt(rotvec @ rotvec))

@@ -236,6 +236,12 @@ def BuildRlfdDiagram(
         else config.residual_activation_s
     )
     max_translation_m, max_rotation_rad = config.residual_bounds(task)
+    if task.residual_max_push_m is not None and config.composition != "residual":
+        raise ValueError(
+            f"task {task.name!r} bounds the residual's push (residual_max_push_m = "
+            f"{task.residual_max_push_m}), which only the 'residual' composition has; got "
+            f"composition {config.composition!r}"
+        )
     if config.composition == "residual":
         composer = ResidualComposer(
             ResidualComposerConfig(
@@ -243,6 +249,7 @@ def BuildRlfdDiagram(
                 max_rotation_rad=max_rotation_rad,
                 mode=config.residual_mode,
                 activation_time_s=activation,
+                max_push_m=task.residual_max_push_m,
             )
         )
     else:

@@ -235,6 +235,10 @@ class TaskSpec:
             of 1 means for this task (m, rad): a few times its fixture error, so the
             policy's range and its exploration are on the scale of what it must
             correct (RJ-45's 30 N limit breaks under a 1 cm jiggle).
+        residual_max_push_m: optional bound on how far a residual may move the
+            set-point down (world -z, into the fixture), m (None = the translation
+            range, as every other direction; 0 = the residual may lift and steer but
+            never push: the DMP does the pushing). Residual composition only.
         rotational_stiffness_Nm_per_rad: optional rotational stiffness of the Cartesian
             impedance controller on this task, N m/rad (None = the controller's, 150):
             a softer wrist turns a rotation residual into a smaller contact torque.
@@ -262,6 +266,7 @@ class TaskSpec:
     residual_activation_s: float = 5.0
     residual_max_translation_m: float = 0.01
     residual_max_rotation_rad: float = 0.087
+    residual_max_push_m: float | None = None
     rotational_stiffness_Nm_per_rad: float | None = None
     translational_stiffness_N_per_m: float | None = None
     residual_filter_time_constant_s: float | None = None
@@ -449,6 +454,7 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.residual_activation_s, "residual_activation_s", allow_zero=True)
     _positive(task.residual_max_translation_m, "residual_max_translation_m")
     _positive(task.residual_max_rotation_rad, "residual_max_rotation_rad")
+    _positive(task.residual_max_push_m, "residual_max_push_m", allow_zero=True)
     _positive(task.rotational_stiffness_Nm_per_rad, "rotational_stiffness_Nm_per_rad")
     _positive(task.translational_stiffness_N_per_m, "translational_stiffness_N_per_m")
     _positive(task.residual_filter_time_constant_s, "residual_filter_time_constant_s")

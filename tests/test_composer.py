@@ -124,3 +124,23 @@ def test_nan_residual_raises_and_cost():
         V_port.Eval(context)
     per_call_us = (time.perf_counter() - start) / n * 1e6
     print(f"ResidualComposer X + V (active residual): {per_call_us:.1f} us")
+
+
+def test_a_push_bound_limits_only_the_downward_translation():
+    """``max_push_m`` caps dp's world -z part; lifting and the other axes keep the range."""
+    down = np.array([0.5, -0.5, -1.0, 0.2, 0.0, 0.0])
+    dp, rotvec = scale_residual(down, 0.01, 0.035, max_push_m=0.002)
+    np.testing.assert_allclose(dp, [0.005, -0.005, -0.002])
+    np.testing.assert_allclose(rotvec, [0.007, 0.0, 0.0])
+    up = np.array([0.0, 0.0, 0.8, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(scale_residual(up, 0.01, 0.035, max_push_m=0.0)[0], [0, 0, 0.008])
+    assert scale_residual(down, 0.01, 0.035, max_push_m=0.0)[0][2] == 0.0
+    np.testing.assert_allclose(scale_residual(down, 0.01, 0.035)[0], [0.005, -0.005, -0.01])
+    rng = np.random.default_rng(3)
+    X, V = _random_pose(rng), np.zeros(6)
+    config = ResidualComposerConfig(max_translation_m=0.01, activation_time_s=0.0, max_push_m=0.0)
+    X_f, _ = _outputs(ResidualComposer(config), X, V, down, 0.0)
+    np.testing.assert_allclose(X_f[:3] - X[:3], [0.005, -0.005, 0.0], atol=1e-15)
+    for bad in (-0.001, float("nan")):
+        with pytest.raises(ValueError, match="max_push_m"):
+            ResidualComposer(ResidualComposerConfig(max_push_m=bad))

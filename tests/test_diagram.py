@@ -265,3 +265,25 @@ def test_a_task_with_a_residual_filter_feeds_the_composer_through_it(peg):
     assert offset == pytest.approx((1.0 - np.exp(-1.0)) * max_translation_m, rel=0.03)
     with pytest.raises(ValueError, match="residual_filter_time_constant_s = 0.1"):
         BuildRlfdDiagram(smooth, model, RlfdDiagramConfig(composition="hybrid"))
+
+
+def test_a_task_with_a_push_bound_gives_it_to_the_composer(peg):
+    """``residual_max_push_m`` reaches the composer: a full downward residual leaves the
+    set-point's height alone, a sideways one moves it; other compositions refuse it."""
+    task, model, X_WP_start = peg
+    no_push = dataclasses.replace(task, residual_max_push_m=0.0)
+    rlfd = BuildRlfdDiagram(no_push, model, RlfdDiagramConfig(residual_activation_s=0.0))
+    assert rlfd.diagram.GetSubsystemByName("composer").config.max_push_m == 0.0
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.array([1.0, 0, -1.0, 0, 0, 0]))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.AdvanceTo(0.05)
+    offset = (
+        rlfd.diagram.GetOutputPort("X_WE_desired").Eval(context)[:3]
+        - rlfd.diagram.GetOutputPort("X_WE_base").Eval(context)[:3]
+    )
+    max_translation_m, _ = RlfdDiagramConfig().residual_bounds(task)
+    np.testing.assert_allclose(offset, [max_translation_m, 0.0, 0.0], atol=1e-12)
+    with pytest.raises(ValueError, match="residual_max_push_m = 0.0"):
+        BuildRlfdDiagram(no_push, model, RlfdDiagramConfig(composition="pure"))

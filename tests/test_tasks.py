@@ -199,6 +199,14 @@ def test_bad_controller_stiffness(tmp_path, field, value):
         load_task(path, check_demo=False)
 
 
+@pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
+def test_bad_push_bound(tmp_path, value):
+    path = _write_variant(tmp_path, lambda d: d.update({"residual_max_push_m": value}))
+    message = "must be non-negative" if math.isfinite(value) else "expected a finite number"
+    with pytest.raises(ValueError, match=rf"residual_max_push_m.*{message}"):
+        load_task(path, check_demo=False)
+
+
 def test_soft_wrist_variants_change_only_the_stiffness():
     """Each soft-wrist variant is its shipped task with a 20 N m/rad wrist: same part,
     fixture, starts, errors and residual bounds (so evaluations share the starts)."""

@@ -24,12 +24,15 @@ class ResidualComposerConfig:
     mode: "full", "translation", "orientation" or "off".
     activation_time_s: the residual is zero before this time (the paper's
         simulation runs the DMP alone for the first half of a 10 s episode), s.
+    max_push_m: the most the residual may move the set-point down (world -z, into
+        the fixtures), m; None = ``max_translation_m`` like the other directions.
     """
 
     max_translation_m: float = 0.02
     max_rotation_rad: float = 0.26
     mode: str = "full"
     activation_time_s: float = 5.0
+    max_push_m: float | None = None
 
 
 class ResidualComposer(LeafSystem):
@@ -49,7 +52,8 @@ class ResidualComposer(LeafSystem):
     * ``X_WE_base`` (7): base pose, position (m) then quaternion [w, x, y, z].
     * ``V_WE_base`` (6): base spatial velocity [w (rad/s); v (m/s)], world.
     * ``residual`` (6): normalised action in [-1, 1] (clipped): ``[dp; rotation
-      vector]`` scaled by ``max_translation_m`` and ``max_rotation_rad``.
+      vector]`` scaled by ``max_translation_m`` and ``max_rotation_rad`` (dp's
+      downward part limited to ``max_push_m`` if set).
     * ``X_WE_desired`` (7): ``p_f = p_b + dp``, ``Q_f = Q_delta o Q_b`` with
       ``Q_delta = [cos(alpha/2), r/|r| sin(alpha/2)]`` (world-frame rotation).
     * ``V_WE_desired`` (6): the base twist, passed through (the residual is held
@@ -69,6 +73,10 @@ class ResidualComposer(LeafSystem):
             raise ValueError(f"mode must be one of {RESIDUAL_MODES}, got {config.mode!r}")
         if config.max_translation_m < 0.0 or config.max_rotation_rad < 0.0:
             raise ValueError("max_translation_m and max_rotation_rad must be >= 0")
+        if config.max_push_m is not None and not (
+            np.isfinite(config.max_push_m) and config.max_push_m >= 0.0
+        ):
+            raise ValueError(f"max_push_m must be a number >= 0 or None, got {config.max_push_m}")
         self.config = config
         self._cached_key: bytes | None = None
         self._cached_correction: tuple[np.ndarray, tuple[float, ...]] = (
@@ -114,6 +122,7 @@ class ResidualComposer(LeafSystem):
                 self.config.max_translation_m,
                 self.config.max_rotation_rad,
                 self.config.mode,
+                self.config.max_push_m,
             )
             self._cached_key = key
             self._cached_correction = (dp, quat_exp_rotation_vector(*rotvec))
