@@ -247,6 +247,19 @@ RUNS["from_source_60"] = {
 # Table VI with Table IV's 4-update SAC residuals. A fine-tune warms its replay buffer
 # with the copied policy's own 1000 steps first: updating from the first step wrecked
 # the copied gear policy (results/full_pose_study.md).
+#: Steps a fine-tune acts with the copied policy before SAC's first update. RJ-45's 60
+#: episodes are only about 900 steps (the force limit ends many early): with 1000, as on
+#: gear, its fine-tunes never updated (results/train_rj45_sac_gs4_from_gear_e60_s0/,
+#: 844 steps), so RJ-45 warms up for 300.
+_TRANSFER_WARM_UP_STEPS = {"gear": 1000, "rj45": 300}
+
+
+def _warm_up_tag(task: str) -> str:
+    """The run-folder tag of a warm-up other than the first runs' 1000 steps."""
+    steps = _TRANSFER_WARM_UP_STEPS[task]
+    return "" if steps == 1000 else f"_ls{steps}"
+
+
 def _add_sac_transfer_runs(suffix: str, full_runs: str, gear: str, rj45: str) -> None:
     """RUNS["sac_source_as_is" + suffix], ["sac_scratch_60" + suffix] and
     ["sac_from_source_60" + suffix]: Table VI's SAC rows between ``gear`` and ``rj45``
@@ -263,13 +276,13 @@ def _add_sac_transfer_runs(suffix: str, full_runs: str, gear: str, rj45: str) ->
     }
     RUNS[f"sac_from_source_60{suffix}"] = {
         target: _run(
-            f"runs/{Path(target).stem}_sac_gs4_from_{Path(source).stem}_e60_s0",
+            f"runs/{Path(target).stem}_sac_gs4_from_{Path(source).stem}{_warm_up_tag(task)}_e60_s0",
             target,
             60,
-            f"{_SAC_GS4_RECIPE} --sac-learning-starts 1000 "
+            f"{_SAC_GS4_RECIPE} --sac-learning-starts {_TRANSFER_WARM_UP_STEPS[task]} "
             f"--init-from {RUNS[full_runs][source][0]}/policy.zip",
         )
-        for target, source, _ in pairs
+        for target, source, task in pairs
     }
 
 
@@ -478,7 +491,9 @@ TABLES: dict[str, Table] = {
         "Source of gear = the RJ-45 policy and back. The paper's 60 episodes are 3 PPO "
         "updates; here PPO updates every 512 steps (about 10 gear or 35 RJ-45 episodes). "
         "The SAC rows use Table IV's 4-update SAC residuals (the paper's columns are its "
-        "PPO); their fine-tunes start updating after 1000 steps of the copied policy.",
+        "PPO); their fine-tunes start updating after 1000 (gear) or 300 (RJ-45) steps of "
+        "the copied policy: RJ-45's 60 episodes are about 900 steps, and its first "
+        "fine-tune, with 1000, never updated (844 steps).",
     ),
 }
 
@@ -588,9 +603,10 @@ TABLES["6_wrist_smooth"] = Table(
     "Table VI's SAC rows between models/tasks/variants/gear_soft_wrist_smooth_rot2deg.yaml "
     "and rj45_soft_wrist_smooth.yaml (Table IV with a soft wrist and a low-passed residual: "
     "20 N m/rad, 0.1 s; 2 deg per residual unit on gear). Source of gear = the RJ-45 "
-    "policy and back; the fine-tunes start updating after 1000 steps of the copied "
-    "policy. A residual of 1 is 1 cm / 2 deg on gear and 3 mm / 3 deg on RJ-45, so a "
-    "copied policy's actions change size. The paper's columns are its physical robot.",
+    "policy and back; the fine-tunes start updating after 1000 (gear) or 300 (RJ-45) "
+    "steps of the copied policy. A residual of 1 is 1 cm / 2 deg on gear and 3 mm / "
+    "3 deg on RJ-45, so a copied policy's actions change size. The paper's columns are "
+    "its physical robot.",
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import json
 import time
+import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -577,7 +578,17 @@ def train(
         "wall_time_s": wall,
         "success_rate_last_50": float(np.mean(log.successes[-50:])) if log.successes else 0.0,
         "success_rate_all": float(np.mean(log.successes)) if log.successes else 0.0,
+        # A fine-tune whose episodes end before SAC's learning starts never updates: the
+        # saved policy is then the copied one, and this says so.
+        "gradient_updates": int(getattr(model, "_n_updates", 0)),
         "date": utc_now(),  # when training finished
     }
+    if metrics["gradient_updates"] == 0:
+        warnings.warn(
+            f"{run_dir}: no gradient update in {metrics['timesteps']} steps, so policy.zip "
+            "is the initial policy (SAC updates after --sac-learning-starts steps, PPO "
+            "after a full rollout)",
+            stacklevel=2,
+        )
     (run_dir / "metrics.json").write_text(format_json(metrics) + "\n")
     return metrics

@@ -76,7 +76,7 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
         algo="ppo",
         episodes=1,
         envs=1,
-        ppo_n_steps=16,
+        ppo_n_steps=8,
         checkpoint_every_episodes=1,
         eval_every_episodes=1,
         eval_episodes=1,
@@ -84,6 +84,7 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
     run = tmp_path / "run"
     metrics = train(config, run, progress_bar=False)
     assert metrics["episodes"] == 1
+    assert metrics["gradient_updates"] > 0  # an 8-step rollout fits in one episode
     assert metrics["date"].startswith("20")
     assert len(list((run / "checkpoints").glob("policy_*_steps.zip"))) == 1
     evaluations = np.load(run / "eval" / "evaluations.npz")
@@ -363,6 +364,15 @@ def test_init_from_starts_from_the_source_networks(tmp_path):
         TrainConfig(init_from=str(tmp_path / "missing.zip"))
     with pytest.raises(ValueError, match="composition"):
         TrainConfig(composition="mixed")
+
+
+def test_a_run_that_ends_before_its_first_update_says_so(tmp_path):
+    """A fine-tune's 60 RJ-45 episodes can end before SAC's learning starts: the saved
+    policy is then the copied one, and the run says so instead of passing it off."""
+    config = TrainConfig(algo="sac", episodes=1, envs=1, sac_learning_starts=10_000)
+    with pytest.warns(UserWarning, match="no gradient update"):
+        metrics = train(config, tmp_path / "run", progress_bar=False)
+    assert metrics["gradient_updates"] == 0
 
 
 def test_sac_warm_up_explores_with_its_policy_not_uniform_samples():
