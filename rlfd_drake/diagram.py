@@ -57,6 +57,9 @@ RESIDUAL_SIZE = 6
 #: controller's own) sets the CartesianImpedanceConfig field of the same name on all
 #: three axes.
 _TASK_GAINS = ("rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m")
+#: Task fields that shape a residual added to the DMP (a filter, a push bound): the
+#: hybrid and pure compositions have no such residual and refuse a task that sets them.
+_RESIDUAL_COMPOSITION_FIELDS = ("residual_filter_time_constant_s", "residual_max_push_m")
 
 
 @dataclass
@@ -236,12 +239,13 @@ def BuildRlfdDiagram(
         else config.residual_activation_s
     )
     max_translation_m, max_rotation_rad = config.residual_bounds(task)
-    if task.residual_max_push_m is not None and config.composition != "residual":
-        raise ValueError(
-            f"task {task.name!r} bounds the residual's push (residual_max_push_m = "
-            f"{task.residual_max_push_m}), which only the 'residual' composition has; got "
-            f"composition {config.composition!r}"
-        )
+    if config.composition != "residual":
+        for name in _RESIDUAL_COMPOSITION_FIELDS:
+            if getattr(task, name) is not None:
+                raise ValueError(
+                    f"task {task.name!r} sets {name} = {getattr(task, name)}, which only "
+                    f"the 'residual' composition has; got composition {config.composition!r}"
+                )
     if config.composition == "residual":
         composer = ResidualComposer(
             ResidualComposerConfig(
@@ -320,12 +324,6 @@ def BuildRlfdDiagram(
     composer_residual = residual_source
     time_constant_s = task.residual_filter_time_constant_s
     if time_constant_s is not None:
-        if config.composition != "residual":
-            raise ValueError(
-                f"task {task.name!r} filters the residual (residual_filter_time_constant_s = "
-                f"{time_constant_s}), which only the 'residual' composition has; got "
-                f"composition {config.composition!r}"
-            )
         residual_filter = builder.AddNamedSystem(
             "residual_filter",
             ResidualFilter(

@@ -536,8 +536,8 @@ def evaluation_markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
-#: A peak felt this close to the goal was felt at the bottom of the insertion, m.
-_AT_THE_BOTTOM_M = 1e-3
+#: A peak felt this close to the goal was felt at the bottom of the insertion, mm.
+_AT_THE_BOTTOM_MM = 1.0
 
 
 def _peak_force_lines(table: dict) -> list[str]:
@@ -548,7 +548,7 @@ def _peak_force_lines(table: dict) -> list[str]:
     lines = [
         "",
         "| peak force felt | n | mean peak N | median time s | median distance to goal mm "
-        "| at the bottom (< 1 mm) |",
+        f"| at the bottom (< {_AT_THE_BOTTOM_MM:g} mm) |",
         "|---|---|---|---|---|---|",
     ]
     success = np.asarray(table["success"], dtype=bool)
@@ -567,7 +567,7 @@ def _peak_force_lines(table: dict) -> list[str]:
         if not rows:
             continue
         force, time, distance = np.array(rows, dtype=float).T
-        bottom = int(np.sum(distance < 1e3 * _AT_THE_BOTTOM_M))
+        bottom = int(np.sum(distance < _AT_THE_BOTTOM_MM))
         lines.append(
             f"| {label} | {len(rows)} | {force.mean():.1f} | {np.median(time):.2f} | "
             f"{np.median(distance):.1f} | {bottom} |"

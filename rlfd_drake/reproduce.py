@@ -251,13 +251,14 @@ RUNS["from_source_60"] = {
 #: episodes are only about 900 steps (the force limit ends many early): with 1000, as on
 #: gear, its fine-tunes never updated (results/train_rj45_sac_gs4_from_gear_e60_s0/,
 #: 844 steps), so RJ-45 warms up for 300.
-_TRANSFER_WARM_UP_STEPS = {"gear": 1000, "rj45": 300}
+_FIRST_WARM_UP_STEPS = 1000
+_TRANSFER_WARM_UP_STEPS = {"gear": _FIRST_WARM_UP_STEPS, "rj45": 300}
 
 
 def _warm_up_tag(task: str) -> str:
-    """The run-folder tag of a warm-up other than the first runs' 1000 steps."""
+    """The run-folder tag of a warm-up other than the first runs' (untagged folders)."""
     steps = _TRANSFER_WARM_UP_STEPS[task]
-    return "" if steps == 1000 else f"_ls{steps}"
+    return "" if steps == _FIRST_WARM_UP_STEPS else f"_ls{steps}"
 
 
 def _add_sac_transfer_runs(suffix: str, full_runs: str, gear: str, rj45: str) -> None:
