@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rlfd_drake.control_math import COMPOSITIONS
+from rlfd_drake.control_math import COMPOSITIONS, PEAK_FORCE_SIGNALS
 
 
 def _print_json(data: dict) -> None:
@@ -328,6 +328,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         force_limit_penalty=args.force_limit_penalty,
         peak_force_cost=args.peak_force_cost,
         peak_force_threshold_n=args.peak_force_threshold_n,
+        peak_force_signal=args.peak_force_signal,
         action_cost=args.action_cost,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
@@ -602,7 +603,14 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--peak-force-threshold-n",
         type=float,
-        help="the peak low-passed contact force that --peak-force-cost starts at, N",
+        help="the peak contact force that --peak-force-cost starts at, N",
+    )
+    train.add_argument(
+        "--peak-force-signal",
+        choices=PEAK_FORCE_SIGNALS,
+        default="low_passed",
+        help="the force --peak-force-cost charges: low_passed (20 ms, as force limits; "
+        "default) or one_step (the 2 ms samples whose peak evaluations report)",
     )
     train.add_argument(
         "--action-cost",

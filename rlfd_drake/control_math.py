@@ -228,6 +228,11 @@ RESIDUAL_MODES: tuple[str, ...] = ("full", "translation", "orientation", "off")
 #: paper's Table III.
 COMPOSITIONS: tuple[str, ...] = ("residual", "hybrid", "pure")
 
+#: The contact force a training peak-force cost may charge: "low_passed" (20 ms, what
+#: force limits check) or "one_step" (the 2 ms samples whose peak evaluations report;
+#: impacts that the low-pass smooths away show in it).
+PEAK_FORCE_SIGNALS: tuple[str, ...] = ("low_passed", "one_step")
+
 
 #: Where a 3-D action of a translation-only or orientation-only policy sits in the 6-D
 #: residual.

@@ -25,7 +25,7 @@ import numpy as np
 from pydrake.gym import DrakeGymEnv
 from pydrake.systems.analysis import Simulator
 
-from rlfd_drake.control_math import pad_residual_part
+from rlfd_drake.control_math import PEAK_FORCE_SIGNALS, pad_residual_part
 from rlfd_drake.diagram import (
     RESIDUAL_SIZE,
     BuildRlfdDiagram,
@@ -86,16 +86,25 @@ def _check_non_negative(value: float, name: str) -> None:
         raise ValueError(f"{name} must be a number >= 0, got {value!r}")
 
 
+# Where each of PEAK_FORCE_SIGNALS sits in the observer's force_metrics port.
+_FORCE_METRICS_INDEX = {"low_passed": 3, "one_step": 0}
+
+
 def check_reward_terms(
     force_limit_penalty: float,
     peak_force_cost: float,
     peak_force_threshold_n: float | None,
     action_cost: float = 0.0,
+    peak_force_signal: str = "low_passed",
 ) -> None:
     """Raises a ValueError naming the field unless the reward's extra terms are valid:
-    ``force_limit_penalty``, ``peak_force_cost`` and ``action_cost`` >= 0, and a peak
+    ``force_limit_penalty``, ``peak_force_cost`` and ``action_cost`` >= 0, a peak
     force cost with a threshold > 0 (a threshold without a cost is refused too: it
-    would do nothing)."""
+    would do nothing) and ``peak_force_signal`` in ``PEAK_FORCE_SIGNALS``."""
+    if peak_force_signal not in PEAK_FORCE_SIGNALS:
+        raise ValueError(
+            f"peak_force_signal must be one of {PEAK_FORCE_SIGNALS}, got {peak_force_signal!r}"
+        )
     _check_non_negative(force_limit_penalty, "force_limit_penalty")
     _check_non_negative(action_cost, "action_cost")
     _check_non_negative(peak_force_cost, "peak_force_cost")
@@ -163,11 +172,13 @@ class RlfdEnv(DrakeGymEnv):
     whole 10 s), ``force_limit_penalty`` (>= 0: subtracted from the reward of the step
     that breaks the force limit), ``peak_force_cost`` and ``peak_force_threshold_n``
     (a step's reward loses ``cost * (e_t - e_(t-1))``, where ``e = max(0, F / threshold
-    - 1)`` and F is the peak low-passed contact force so far: an episode pays ``cost``
-    per threshold of peak force above the threshold that its residual steps added;
-    0 by default, the paper's reward), ``action_cost`` (a step's reward loses
-    ``action_cost`` times the mean square of its clipped action: a residual that is
-    not needed costs; 0 by default, the paper's reward), ``diagram_config`` (RlfdDiagramConfig),
+    - 1)`` and F is the peak contact force so far: an episode pays ``cost`` per
+    threshold of peak force above the threshold that its residual steps added; 0 by
+    default, the paper's reward), ``peak_force_signal`` ("low_passed": F is the 20 ms
+    low-passed force, as force limits; "one_step": the 2 ms samples), ``action_cost``
+    (a step's reward loses ``action_cost`` times the mean square of its clipped action:
+    a residual that is not needed costs; 0 by default, the paper's reward),
+    ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
     """
@@ -188,6 +199,7 @@ class RlfdEnv(DrakeGymEnv):
         peak_force_cost: float = 0.0,
         peak_force_threshold_n: float | None = None,
         action_cost: float = 0.0,
+        peak_force_signal: str = "low_passed",
     ) -> None:
         self._init_args = dict(
             task=task,
@@ -198,6 +210,7 @@ class RlfdEnv(DrakeGymEnv):
             peak_force_cost=peak_force_cost,
             peak_force_threshold_n=peak_force_threshold_n,
             action_cost=action_cost,
+            peak_force_signal=peak_force_signal,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -211,8 +224,13 @@ class RlfdEnv(DrakeGymEnv):
         if info_handler is not None and not callable(info_handler):
             raise ValueError("info_handler must be callable(simulator) -> dict")
         check_reward_terms(
-            force_limit_penalty, peak_force_cost, peak_force_threshold_n, action_cost
+            force_limit_penalty,
+            peak_force_cost,
+            peak_force_threshold_n,
+            action_cost,
+            peak_force_signal,
         )
+        self.peak_force_signal = peak_force_signal
         self.action_cost = float(action_cost)
         self.reward_kind = reward
         self.force_limit_penalty = float(force_limit_penalty)
@@ -335,7 +353,7 @@ class RlfdEnv(DrakeGymEnv):
         observation = self._observe()
         self._succeeded = self._failure_reason is None and self._inserted()
         # The DMP's approach before the residual acts is not charged to it.
-        self._peak_force_excess = self._excess_peak_force(self._peak_low_passed_force())
+        self._peak_force_excess = self._excess_peak_force(self._peak_force_charged())
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
@@ -346,6 +364,10 @@ class RlfdEnv(DrakeGymEnv):
     def _peak_low_passed_force(self) -> float:
         """The peak of the low-passed contact force so far, N (what limits check)."""
         return float(self._port("force_metrics")[3])
+
+    def _peak_force_charged(self) -> float:
+        """The peak of the contact force the peak-force cost charges so far, N."""
+        return float(self._port("force_metrics")[_FORCE_METRICS_INDEX[self.peak_force_signal]])
 
     def _excess_peak_force(self, peak_n: float) -> float:
         """max(0, peak_n / peak_force_threshold_n - 1); 0 without a threshold."""
@@ -402,10 +424,10 @@ class RlfdEnv(DrakeGymEnv):
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
         if self.action_cost > 0.0:
             reward -= self.action_cost * float(np.mean(np.square(action)))
-        # Force limits and costs apply to the low-passed contact force (ObserverConfig).
+        # Force limits apply to the low-passed contact force (ObserverConfig).
         peak_n = self._peak_low_passed_force()
         if self.peak_force_cost > 0.0:
-            excess = self._excess_peak_force(peak_n)
+            excess = self._excess_peak_force(self._peak_force_charged())
             reward -= self.peak_force_cost * (excess - self._peak_force_excess)
             self._peak_force_excess = excess
         limit = self.task.force_limit_n

@@ -121,6 +121,9 @@ class TrainConfig:
             added (``RlfdEnv``); 0 / None = the paper's sparse reward. Unlike a force
             limit, the episode goes on, so a forceful success still scores above a
             failure and exploration keeps its successes.
+        peak_force_signal: the force the peak-force cost charges: "low_passed" (the
+            20 ms low-passed force that force limits check) or "one_step" (the 2 ms
+            samples whose peak the evaluations report; impacts show in it).
         action_cost: each training step pays this times the mean square of its
             action (``RlfdEnv``): where the DMP alone inserts, the residual is pulled
             toward zero; 0 = the paper's sparse reward.
@@ -152,6 +155,7 @@ class TrainConfig:
     force_limit_penalty: float = 0.0
     peak_force_cost: float = 0.0
     peak_force_threshold_n: float | None = None
+    peak_force_signal: str = "low_passed"
     action_cost: float = 0.0
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
@@ -220,6 +224,7 @@ class TrainConfig:
             self.peak_force_cost,
             self.peak_force_threshold_n,
             self.action_cost,
+            self.peak_force_signal,
         )
 
 
@@ -235,6 +240,7 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "force_limit_penalty": config.force_limit_penalty,
         "peak_force_cost": config.peak_force_cost,
         "peak_force_threshold_n": config.peak_force_threshold_n,
+        "peak_force_signal": config.peak_force_signal,
         "action_cost": config.action_cost,
     }
 

@@ -240,10 +240,12 @@ def test_training_force_limit_ends_episodes_that_push_harder(penalty):
     assert reward == -penalty
 
 
-def test_peak_force_cost_charges_the_peak_force_the_residual_steps_add():
+@pytest.mark.parametrize("signal, index", [("low_passed", 3), ("one_step", 0)])
+def test_peak_force_cost_charges_the_peak_force_the_residual_steps_add(signal, index):
     """--peak-force-cost C --peak-force-threshold-n F: the rewards of an episode sum to
-    the paper's minus C (e_end - e_activation), e = max(0, peak low-passed force / F - 1);
-    the episode goes on past the threshold."""
+    the paper's minus C (e_end - e_activation), e = max(0, peak force / F - 1), the
+    force being the low-passed one or the 2 ms one (--peak-force-signal); the episode
+    goes on past the threshold."""
     from rlfd_drake.train import _env_kwargs
 
     options = {
@@ -255,17 +257,19 @@ def test_peak_force_cost_charges_the_peak_force_the_residual_steps_add():
     def episode(**cost) -> tuple[list[float], float, float]:
         env = RlfdEnv(**_env_kwargs(TrainConfig(task="peg_easy", **cost)))
         env.reset(seed=0, options=options)
-        at_activation = float(env._port("force_metrics")[3])
+        at_activation = float(env._port("force_metrics")[index])
         rewards = []
         for _ in range(10):  # the peg slides in at about step 15
             _, reward, terminated, truncated, _ = env.step(np.zeros(6, np.float32))
             rewards.append(reward)
             if terminated or truncated:
                 break
-        return rewards, at_activation, float(env._port("force_metrics")[3])
+        return rewards, at_activation, float(env._port("force_metrics")[index])
 
     paper, _, _ = episode()
-    charged, start, end = episode(peak_force_cost=0.5, peak_force_threshold_n=1.0)
+    charged, start, end = episode(
+        peak_force_cost=0.5, peak_force_threshold_n=1.0, peak_force_signal=signal
+    )
     assert len(charged) == len(paper) == 10  # no termination at the threshold
     assert end > start  # the chamfer contact raises the peak after the activation
     expected = 0.5 * (max(0.0, end - 1.0) - max(0.0, start - 1.0))
@@ -285,6 +289,11 @@ def test_peak_force_cost_is_validated():
             TrainConfig(peak_force_cost=cost, peak_force_threshold_n=threshold)
     with pytest.raises(ValueError, match="peak_force_cost must be a number >= 0, got nan"):
         RlfdEnv("peg_easy", peak_force_cost=float("nan"))
+    message = "peak_force_signal must be one of ('low_passed', 'one_step'), got 'raw'"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        TrainConfig(peak_force_cost=0.5, peak_force_threshold_n=50.0, peak_force_signal="raw")
+    with pytest.raises(ValueError, match=re.escape(message)):
+        RlfdEnv("peg_easy", peak_force_signal="raw")
 
 
 def test_action_cost_charges_each_step_its_mean_square_action():
