@@ -353,7 +353,7 @@ class RlfdEnv(DrakeGymEnv):
         observation = self._observe()
         self._succeeded = self._failure_reason is None and self._inserted()
         # The DMP's approach before the residual acts is not charged to it.
-        self._peak_force_excess = self._excess_peak_force(self._peak_force_charged())
+        self._peak_force_excess = self._excess_peak_force(self._peak_force(self.peak_force_signal))
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
@@ -361,13 +361,10 @@ class RlfdEnv(DrakeGymEnv):
         self._last_observation = np.asarray(value, dtype=np.float32)
         return self._last_observation
 
-    def _peak_low_passed_force(self) -> float:
-        """The peak of the low-passed contact force so far, N (what limits check)."""
-        return float(self._port("force_metrics")[3])
-
-    def _peak_force_charged(self) -> float:
-        """The peak of the contact force the peak-force cost charges so far, N."""
-        return float(self._port("force_metrics")[_FORCE_METRICS_INDEX[self.peak_force_signal]])
+    def _peak_force(self, signal: str) -> float:
+        """The peak so far of one of PEAK_FORCE_SIGNALS, N ("low_passed": what limits
+        check; the cost charges ``self.peak_force_signal``)."""
+        return float(self._port("force_metrics")[_FORCE_METRICS_INDEX[signal]])
 
     def _excess_peak_force(self, peak_n: float) -> float:
         """max(0, peak_n / peak_force_threshold_n - 1); 0 without a threshold."""
@@ -425,9 +422,9 @@ class RlfdEnv(DrakeGymEnv):
         if self.action_cost > 0.0:
             reward -= self.action_cost * float(np.mean(np.square(action)))
         # Force limits apply to the low-passed contact force (ObserverConfig).
-        peak_n = self._peak_low_passed_force()
+        peak_n = self._peak_force("low_passed")
         if self.peak_force_cost > 0.0:
-            excess = self._excess_peak_force(self._peak_force_charged())
+            excess = self._excess_peak_force(self._peak_force(self.peak_force_signal))
             reward -= self.peak_force_cost * (excess - self._peak_force_excess)
             self._peak_force_excess = excess
         limit = self.task.force_limit_n
