@@ -66,13 +66,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def _cmd_demo_record(args: argparse.Namespace) -> int:
     from rlfd_drake.demonstration import save_demonstration
-    from rlfd_drake.expert import record_demonstration
+    from rlfd_drake.expert import ExpertConfig, record_demonstration
     from rlfd_drake.tasks import load_task
 
     if Path(args.out).exists() and not args.overwrite:
         raise FileExistsError(f"{args.out} exists; pass --overwrite to replace it")
+    config = ExpertConfig() if args.insert_s is None else ExpertConfig(insert_s=args.insert_s)
     task = load_task(args.task, check_demo=False)
-    demo = record_demonstration(task, seed=args.seed)
+    demo = record_demonstration(task, seed=args.seed, config=config)
     path = save_demonstration(demo, args.out, overwrite=args.overwrite)
     print(f"recorded {len(demo.times)} poses over {demo.duration:.2f} s -> {path}")
     return 0
@@ -491,6 +492,13 @@ def build_parser() -> argparse.ArgumentParser:
     record.add_argument("--task", required=True)
     record.add_argument("--out", required=True, help="file .csv or .npz")
     record.add_argument("--seed", type=int, default=0)
+    record.add_argument(
+        "--insert-s",
+        type=float,
+        default=None,
+        help="duration of the expert's descent into the fixture, s (default: ExpertConfig's "
+        "2.6 s; a slower descent lands softer)",
+    )
     record.add_argument("--overwrite", action="store_true")
     record.set_defaults(func=_cmd_demo_record)
     teleop = demo_sub.add_parser(

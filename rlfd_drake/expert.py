@@ -70,6 +70,18 @@ class ExpertConfig:
     timing_variation: float = 0.03
     record_period_s: float = 0.01
 
+    def __post_init__(self) -> None:
+        for name in ("approach_s", "pause_s", "insert_s", "hold_s", "record_period_s"):
+            value = getattr(self, name)
+            # pause_s and hold_s may be 0 (no pause, no hold); the moving phases may not.
+            allow_zero = name in ("pause_s", "hold_s")
+            if not np.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
+                raise ValueError(f"{name}: must be a positive duration in s, got {value!r}")
+        for name in ("pre_insert_height_m", "push_depth_m", "variation_m", "timing_variation"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0.0:
+                raise ValueError(f"{name}: must be finite and >= 0, got {value!r}")
+
 
 def minimum_jerk(s: np.ndarray) -> np.ndarray:
     """Minimum-jerk profile 10 s^3 - 15 s^4 + 6 s^5 on s in [0, 1], and its derivative

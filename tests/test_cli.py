@@ -43,6 +43,10 @@ def test_demo_record_refuses_to_overwrite(tmp_path, capsys):
     out.write_text("precious\n")
     assert main(["demo", "record", "--task", "peg_easy", "--out", str(out)]) == 2
     assert out.read_text() == "precious\n"
+    fresh = tmp_path / "fresh.csv"
+    assert main(["demo", "record", "--task", "rj45", "--insert-s", "0", "--out", str(fresh)]) == 2
+    assert "insert_s: must be a positive duration" in capsys.readouterr().err
+    assert not fresh.exists()
 
 
 def test_evaluation_file_names_of_policy_specs():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import NominalGoal
@@ -36,3 +37,32 @@ def test_recorded_demo_inserts_and_matches_the_committed_one():
     assert np.linalg.norm(demo.positions[-1] - NominalGoal(task).translation()) < task.kappa_m
     committed = load_demonstration(task.demo_path())
     np.testing.assert_allclose(demo.positions, committed.positions, atol=1e-6)
+
+
+def test_a_longer_insert_phase_descends_proportionally_slower():
+    task = load_task("rj45")
+    goal = NominalGoal(task)
+    speeds = []
+    for insert_s in (2.6, 5.2):
+        config = ExpertConfig(insert_s=insert_s, timing_variation=0.0)
+        times, _, _, twists = expert_path(
+            goal, task.fixture.depth_m, config, np.random.default_rng(0)
+        )
+        descent = times > config.approach_s + config.pause_s
+        speeds.append(np.max(np.abs(twists[descent, 5])))
+    assert speeds[1] == pytest.approx(speeds[0] / 2.0, rel=1e-3)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("insert_s", 0.0),
+        ("approach_s", -1.0),
+        ("record_period_s", float("nan")),
+        ("push_depth_m", -0.001),
+        ("variation_m", float("inf")),
+    ],
+)
+def test_bad_expert_config_names_the_field(field, value):
+    with pytest.raises(ValueError, match=rf"^{field}: .*{value!r}"):
+        ExpertConfig(**{field: value})

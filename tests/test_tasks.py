@@ -237,5 +237,7 @@ def test_every_variant_loads_and_is_named_by_its_file():
         variant = load_task(path)
         assert variant.name == path.stem, path
         shipped = load_task(path.stem.split("_")[0], check_demo=False)
-        assert variant.demo == shipped.demo
+        # A variant keeps its task's demonstration or names another one of the same task
+        # (e.g. demos/rj45_slow_insert.csv).
+        assert Path(variant.demo).stem.startswith(shipped.name), path
         assert evaluation_size(variant) == evaluation_size(shipped)
