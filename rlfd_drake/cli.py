@@ -416,9 +416,12 @@ def _cmd_seeds(args: argparse.Namespace) -> int:
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from rlfd_drake.evaluate import evaluate, evaluation_name, trained_mode, write_evaluation
     from rlfd_drake.results import check_result_name, results_dir
+    from rlfd_drake.tasks import evaluation_size, load_task
 
     if args.residual_mode is None:
         args.residual_mode = trained_mode(args.policy)
+    if args.episodes is None:  # the task's grid (160 orientation starts, 500 peg starts)
+        args.episodes = evaluation_size(load_task(args.task, check_demo=False))
     if args.noise_scale is not None and not args.stochastic:
         raise ValueError(f"--noise-scale {args.noise_scale} needs --stochastic")
     noise_scale = 1.0 if args.noise_scale is None else args.noise_scale

@@ -88,6 +88,24 @@ def test_evaluate_checks_its_result_name_before_running(tmp_path, monkeypatch, c
     assert "result name must be a plain file stem, got 'sub/dir'" in capsys.readouterr().err
 
 
+def test_evaluate_defaults_to_the_task_grid(tmp_path, monkeypatch, capsys):
+    """Without --episodes the evaluation runs the task's grid (it crashed on None)."""
+    import rlfd_drake.evaluate
+
+    monkeypatch.chdir(tmp_path)
+    calls = {}
+
+    def record(task, policy, episodes, **kwargs):
+        calls["episodes"] = episodes
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(rlfd_drake.evaluate, "evaluate", record)
+    assert main(["evaluate", "--task", "rj45", "--policy", "dmp"]) == 2
+    assert calls["episodes"] == 160
+    assert main(["evaluate", "--task", "peg_easy", "--policy", "dmp"]) == 2
+    assert calls["episodes"] == 500
+
+
 def test_noise_scale_needs_stochastic(capsys):
     assert main(["evaluate", "--policy", "dmp", "--noise-scale", "0.5", "--episodes", "1"]) == 2
     assert "--noise-scale 0.5 needs --stochastic" in capsys.readouterr().err
