@@ -35,10 +35,11 @@ from stable_baselines3.common.callbacks import (
     EventCallback,
 )
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
 from rlfd_drake.control_math import RESIDUAL_PARTS
-from rlfd_drake.diagram import COMPOSITIONS
+from rlfd_drake.diagram import COMPOSITIONS, RlfdDiagramConfig
 from rlfd_drake.env import (
     ENV_IDS,
     AppliedResidualAction,
@@ -127,6 +128,12 @@ class TrainConfig:
         action_cost: each training step pays this times the mean square of its
             action (``RlfdEnv``): where the DMP alone inserts, the residual is pulled
             toward zero; 0 = the paper's sparse reward.
+        sac_correlated_noise: SAC only: the stationary standard deviation (in units of
+            the residual's range) of an Ornstein-Uhlenbeck noise added to the actions
+            SAC explores with, restarted from 0 at each episode (``exploration_noise``);
+            0 = none (SAC's own noise, independent at each 0.1 s step, whose offsets
+            average out before they move the part as far as a missed hole is off).
+        sac_correlated_noise_time_s: that noise's correlation time, s.
     """
 
     task: str = "peg_easy"
@@ -160,6 +167,8 @@ class TrainConfig:
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
+    sac_correlated_noise: float = 0.0
+    sac_correlated_noise_time_s: float = 2.0
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -219,6 +228,22 @@ class TrainConfig:
             )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
+        if not (np.isfinite(self.sac_correlated_noise) and self.sac_correlated_noise >= 0):
+            raise ValueError(
+                f"sac_correlated_noise must be a number >= 0, got {self.sac_correlated_noise}"
+            )
+        if self.sac_correlated_noise > 0 and self.algo != "sac":
+            raise ValueError(
+                f"sac_correlated_noise={self.sac_correlated_noise} needs algo 'sac', "
+                f"got {self.algo!r}"
+            )
+        if not (
+            np.isfinite(self.sac_correlated_noise_time_s) and self.sac_correlated_noise_time_s > 0
+        ):
+            raise ValueError(
+                "sac_correlated_noise_time_s must be a positive number, got "
+                f"{self.sac_correlated_noise_time_s}"
+            )
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -282,6 +307,28 @@ class ResidualSAC(SAC):
 
     def _sample_action(self, learning_starts, action_noise=None, n_envs=1):
         return super()._sample_action(0, action_noise, n_envs)
+
+
+def exploration_noise(
+    stationary_std: float, time_s: float, action_size: int, step_s: float
+) -> OrnsteinUhlenbeckActionNoise | None:
+    """The Ornstein-Uhlenbeck noise of ``TrainConfig.sac_correlated_noise`` (None for 0).
+
+    SB3's process is ``x <- x + theta (0 - x) dt + sigma sqrt(dt) N(0, 1)``, whose
+    stationary std is ``sigma / sqrt(2 theta)``: with ``theta = 1 / time_s`` the std
+    ``stationary_std`` needs ``sigma = stationary_std sqrt(2 / time_s)``. SB3 starts it
+    from 0 at each episode's end (per env), so an episode explores one slowly drifting
+    offset instead of a jiggle.
+    """
+    if stationary_std == 0:
+        return None
+    zeros = np.zeros(action_size)
+    return OrnsteinUhlenbeckActionNoise(
+        mean=zeros,
+        sigma=np.full(action_size, stationary_std * np.sqrt(2.0 / time_s)),
+        theta=1.0 / time_s,
+        dt=step_s,
+    )
 
 
 def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
@@ -352,6 +399,12 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             else float(config.sac_target_entropy),
             policy_kwargs=dict(
                 net_arch=dict(pi=[400, 300], qf=[300]), activation_fn=torch.nn.ReLU, **inputs
+            ),
+            action_noise=exploration_noise(
+                config.sac_correlated_noise,
+                config.sac_correlated_noise_time_s,
+                venv.action_space.shape[0],
+                RlfdDiagramConfig().residual_period_s,
             ),
             **common,
         )

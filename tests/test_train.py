@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from rlfd_drake.diagram import RlfdDiagramConfig
@@ -428,3 +429,49 @@ def test_applied_action_only_trains_a_3d_policy_that_deploys_padded(tmp_path):
 def test_applied_action_only_needs_a_partial_residual_mode():
     with pytest.raises(ValueError, match="applied_action_only needs residual_mode"):
         TrainConfig(residual_mode="full", applied_action_only=True)
+
+
+def test_correlated_noise_has_its_stationary_std_and_correlation_time():
+    from rlfd_drake.train import exploration_noise
+
+    assert exploration_noise(0.0, 2.0, 6, 0.1) is None
+    noise = exploration_noise(0.4, 2.0, 3, 0.1)
+    set_random_seed(0)  # SB3's noise draws from numpy's global generator, seeded by SB3
+    samples = np.array([noise() for _ in range(40_000)])
+    assert np.std(samples[2000:]) == pytest.approx(0.4, rel=0.1)
+    lag1 = np.corrcoef(samples[2000:-1, 0], samples[2001:, 0])[0, 1]
+    assert lag1 == pytest.approx(np.exp(-0.1 / 2.0), abs=0.01)
+    noise.reset()  # each episode starts from a zero offset
+    np.testing.assert_array_equal(noise.noise_prev, 0.0)
+
+
+def test_sac_explores_with_the_correlated_noise_from_its_warm_up():
+    """The explored actions are the policy's (tiny) jiggle plus a slowly drifting offset;
+    without the option they are the jiggle alone."""
+    kwargs = dict(algo="sac", envs=1, history=1, sac_learning_starts=1000, log_std_init=-5)
+
+    def explored(config):
+        model = make_model(config, fast_venv(), None)
+        model._last_obs = np.zeros((1, 26), np.float32)
+        set_random_seed(0)
+        return np.array([model._sample_action(1000, model.action_noise)[0][0] for _ in range(400)])
+
+    plain = explored(TrainConfig(**kwargs))
+    drifting = explored(TrainConfig(**kwargs, sac_correlated_noise=0.4))
+    assert np.max(np.abs(plain)) < 0.05
+    assert np.std(drifting) > 0.1
+    assert np.corrcoef(drifting[:-1, 0], drifting[1:, 0])[0, 1] > 0.8
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"algo": "sac", "sac_correlated_noise": -0.1}, "sac_correlated_noise must be a number"),
+        ({"algo": "sac", "sac_correlated_noise": float("nan")}, "sac_correlated_noise must be"),
+        ({"algo": "ppo", "sac_correlated_noise": 0.3}, "sac_correlated_noise=0.3 needs algo"),
+        ({"algo": "sac", "sac_correlated_noise_time_s": 0.0}, "sac_correlated_noise_time_s must"),
+    ],
+)
+def test_correlated_noise_is_validated(fields, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**fields)
