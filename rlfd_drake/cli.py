@@ -333,7 +333,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         action_cost=args.action_cost,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
-        sac_correlated_noise=args.sac_correlated_noise,
+        sac_correlated_noise=tuple(args.sac_correlated_noise),
         sac_correlated_noise_time_s=args.sac_correlated_noise_time_s,
         # The default stays TrainConfig's (importing it here would load torch).
         **({} if args.contact_torque_nm is None else {"contact_torque_nm": args.contact_torque_nm}),
@@ -572,9 +572,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--sac-correlated-noise",
         type=float,
-        default=0.0,
+        nargs="+",
+        default=[0.0],
         help="SAC: std (in units of the residual's range) of an Ornstein-Uhlenbeck noise "
-        "added to the explored actions, restarted at each episode (default 0: none)",
+        "added to the explored actions, restarted at each episode: one value, or one per "
+        "action component (e.g. 0.4 0.4 0 0 0 0: lateral only); default 0: none",
     )
     train.add_argument(
         "--sac-correlated-noise-time-s",

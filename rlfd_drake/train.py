@@ -128,11 +128,13 @@ class TrainConfig:
         action_cost: each training step pays this times the mean square of its
             action (``RlfdEnv``): where the DMP alone inserts, the residual is pulled
             toward zero; 0 = the paper's sparse reward.
-        sac_correlated_noise: SAC only: the stationary standard deviation (in units of
-            the residual's range) of an Ornstein-Uhlenbeck noise added to the actions
-            SAC explores with, restarted from 0 at each episode (``exploration_noise``);
-            0 = none (SAC's own noise, independent at each 0.1 s step, whose offsets
-            average out before they move the part as far as a missed hole is off).
+        sac_correlated_noise: SAC only: the stationary standard deviations (in units
+            of the residual's range) of an Ornstein-Uhlenbeck noise added to the actions
+            SAC explores with, restarted from 0 at each episode (``exploration_noise``):
+            one value for every action component, or one per component (e.g. lateral
+            only: 0.4, 0.4, 0, 0, 0, 0); all 0 = none (SAC's own noise, independent at
+            each 0.1 s step, whose offsets average out before they move the part as far
+            as a missed hole is off).
         sac_correlated_noise_time_s: that noise's correlation time, s.
     """
 
@@ -167,7 +169,7 @@ class TrainConfig:
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
-    sac_correlated_noise: float = 0.0
+    sac_correlated_noise: tuple[float, ...] = (0.0,)
     sac_correlated_noise_time_s: float = 2.0
 
     def __post_init__(self) -> None:
@@ -228,11 +230,13 @@ class TrainConfig:
             )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
-        if not (np.isfinite(self.sac_correlated_noise) and self.sac_correlated_noise >= 0):
+        noise = np.asarray(self.sac_correlated_noise, dtype=float)
+        if noise.ndim != 1 or noise.size == 0 or not np.all(np.isfinite(noise) & (noise >= 0)):
             raise ValueError(
-                f"sac_correlated_noise must be a number >= 0, got {self.sac_correlated_noise}"
+                "sac_correlated_noise must be one or more numbers >= 0, got "
+                f"{self.sac_correlated_noise}"
             )
-        if self.sac_correlated_noise > 0 and self.algo != "sac":
+        if np.any(noise > 0) and self.algo != "sac":
             raise ValueError(
                 f"sac_correlated_noise={self.sac_correlated_noise} needs algo 'sac', "
                 f"got {self.algo!r}"
@@ -310,9 +314,10 @@ class ResidualSAC(SAC):
 
 
 def exploration_noise(
-    stationary_std: float, time_s: float, action_size: int, step_s: float
+    stationary_std: float | tuple[float, ...], time_s: float, action_size: int, step_s: float
 ) -> OrnsteinUhlenbeckActionNoise | None:
-    """The Ornstein-Uhlenbeck noise of ``TrainConfig.sac_correlated_noise`` (None for 0).
+    """The Ornstein-Uhlenbeck noise of ``TrainConfig.sac_correlated_noise`` (None if all
+    its standard deviations are 0): one std for every action component, or one each.
 
     SB3's process is ``x <- x + theta (0 - x) dt + sigma sqrt(dt) N(0, 1)``, whose
     stationary std is ``sigma / sqrt(2 theta)``: with ``theta = 1 / time_s`` the std
@@ -320,12 +325,17 @@ def exploration_noise(
     from 0 at each episode's end (per env), so an episode explores one slowly drifting
     offset instead of a jiggle.
     """
-    if stationary_std == 0:
+    std = np.atleast_1d(np.asarray(stationary_std, dtype=float))
+    if std.size not in (1, action_size):
+        raise ValueError(
+            f"sac_correlated_noise must have 1 or {action_size} (the action's size) values, "
+            f"got {std.size}: {tuple(std)}"
+        )
+    if not np.any(std > 0):
         return None
-    zeros = np.zeros(action_size)
     return OrnsteinUhlenbeckActionNoise(
-        mean=zeros,
-        sigma=np.full(action_size, stationary_std * np.sqrt(2.0 / time_s)),
+        mean=np.zeros(action_size),
+        sigma=np.broadcast_to(std, (action_size,)) * np.sqrt(2.0 / time_s),
         theta=1.0 / time_s,
         dt=step_s,
     )
@@ -567,8 +577,10 @@ def train(
     run_dir.mkdir(parents=True, exist_ok=True)
     if resume and config_path.exists():
         # Fields added since the run started take their defaults.
-        saved = {**asdict(TrainConfig()), **json.loads(config_path.read_text())["config"]}
-        if saved != asdict(config):
+        # Compared as JSON, where tuples are lists.
+        defaults = json.loads(json.dumps(asdict(TrainConfig())))
+        saved = {**defaults, **json.loads(config_path.read_text())["config"]}
+        if saved != json.loads(json.dumps(asdict(config))):
             raise ValueError(
                 f"--resume with a different configuration than {config_path}: "
                 f"saved {saved}, given {asdict(config)}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -95,6 +96,10 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
     assert json.loads((run / "config.json").read_text())["config"]["algo"] == "ppo"
     with pytest.raises(FileExistsError, match="already holds a run"):
         train(config, run, progress_bar=False)
+    # Resuming compares the configuration as saved (JSON: tuple fields come back lists).
+    assert train(config, run, resume=True, progress_bar=False)["episodes"] == 1
+    with pytest.raises(ValueError, match="--resume with a different configuration"):
+        train(replace(config, ppo_n_steps=16), run, resume=True, progress_bar=False)
 
 
 class _CountCalls(BaseCallback):
@@ -457,18 +462,24 @@ def test_sac_explores_with_the_correlated_noise_from_its_warm_up():
         return np.array([model._sample_action(1000, model.action_noise)[0][0] for _ in range(400)])
 
     plain = explored(TrainConfig(**kwargs))
-    drifting = explored(TrainConfig(**kwargs, sac_correlated_noise=0.4))
+    drifting = explored(TrainConfig(**kwargs, sac_correlated_noise=(0.4,)))
+    lateral = explored(TrainConfig(**kwargs, sac_correlated_noise=(0.4, 0.4, 0, 0, 0, 0)))
     assert np.max(np.abs(plain)) < 0.05
-    assert np.std(drifting) > 0.1
+    assert np.all(np.std(drifting, axis=0) > 0.1)
     assert np.corrcoef(drifting[:-1, 0], drifting[1:, 0])[0, 1] > 0.8
+    assert np.all(np.std(lateral[:, :2], axis=0) > 0.1)
+    assert np.max(np.abs(lateral[:, 2:])) < 0.05  # the other components: the jiggle only
+    with pytest.raises(ValueError, match="sac_correlated_noise must have 1 or 6"):
+        make_model(TrainConfig(**kwargs, sac_correlated_noise=(0.4, 0.4)), fast_venv(), None)
 
 
 @pytest.mark.parametrize(
     "fields, message",
     [
-        ({"algo": "sac", "sac_correlated_noise": -0.1}, "sac_correlated_noise must be a number"),
-        ({"algo": "sac", "sac_correlated_noise": float("nan")}, "sac_correlated_noise must be"),
-        ({"algo": "ppo", "sac_correlated_noise": 0.3}, "sac_correlated_noise=0.3 needs algo"),
+        ({"algo": "sac", "sac_correlated_noise": (0.4, -0.1)}, "sac_correlated_noise must be one"),
+        ({"algo": "sac", "sac_correlated_noise": (float("nan"),)}, "sac_correlated_noise must"),
+        ({"algo": "sac", "sac_correlated_noise": ()}, "sac_correlated_noise must be one or more"),
+        ({"algo": "ppo", "sac_correlated_noise": (0.3,)}, r"sac_correlated_noise=\(0.3,\) needs"),
         ({"algo": "sac", "sac_correlated_noise_time_s": 0.0}, "sac_correlated_noise_time_s must"),
     ],
 )
