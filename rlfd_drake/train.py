@@ -169,7 +169,7 @@ class TrainConfig:
     scaled_observation: bool = False
     contact_torque_nm: float = CONTACT_TORQUE_PER_UNIT_NM
     applied_action_only: bool = False
-    sac_correlated_noise: tuple[float, ...] = (0.0,)
+    sac_correlated_noise: float | tuple[float, ...] = (0.0,)
     sac_correlated_noise_time_s: float = 2.0
 
     def __post_init__(self) -> None:
@@ -230,7 +230,7 @@ class TrainConfig:
             )
         if not 0.0 <= self.curriculum_start <= 1.0:
             raise ValueError(f"curriculum_start must be in [0, 1], got {self.curriculum_start}")
-        noise = np.asarray(self.sac_correlated_noise, dtype=float)
+        noise = np.atleast_1d(np.asarray(self.sac_correlated_noise, dtype=float))
         if noise.ndim != 1 or noise.size == 0 or not np.all(np.isfinite(noise) & (noise >= 0)):
             raise ValueError(
                 "sac_correlated_noise must be one or more numbers >= 0, got "

@@ -462,7 +462,7 @@ def test_sac_explores_with_the_correlated_noise_from_its_warm_up():
         return np.array([model._sample_action(1000, model.action_noise)[0][0] for _ in range(400)])
 
     plain = explored(TrainConfig(**kwargs))
-    drifting = explored(TrainConfig(**kwargs, sac_correlated_noise=(0.4,)))
+    drifting = explored(TrainConfig(**kwargs, sac_correlated_noise=0.4))  # all components
     lateral = explored(TrainConfig(**kwargs, sac_correlated_noise=(0.4, 0.4, 0, 0, 0, 0)))
     assert np.max(np.abs(plain)) < 0.05
     assert np.all(np.std(drifting, axis=0) > 0.1)
