@@ -76,7 +76,8 @@ class ExpertConfig:
             # pause_s and hold_s may be 0 (no pause, no hold); the moving phases may not.
             allow_zero = name in ("pause_s", "hold_s")
             if not np.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
-                raise ValueError(f"{name}: must be a positive duration in s, got {value!r}")
+                kind = "a duration >= 0" if allow_zero else "a positive duration"
+                raise ValueError(f"{name}: must be {kind} in s, got {value!r}")
         for name in ("pre_insert_height_m", "push_depth_m", "variation_m", "timing_variation"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0:

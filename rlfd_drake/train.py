@@ -39,7 +39,7 @@ from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
 from rlfd_drake.control_math import RESIDUAL_PARTS
-from rlfd_drake.diagram import COMPOSITIONS, RlfdDiagramConfig
+from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import (
     ENV_IDS,
     AppliedResidualAction,
@@ -414,7 +414,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
                 config.sac_correlated_noise,
                 config.sac_correlated_noise_time_s,
                 venv.action_space.shape[0],
-                RlfdDiagramConfig().residual_period_s,
+                venv.get_attr("diagram_config", [0])[0].residual_period_s,
             ),
             **common,
         )
