@@ -223,7 +223,8 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
             grid=False,
             residual_mode=residual_mode,
         )
-        write_evaluation(result, f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}")
+        name = f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}"
+        write_evaluation(result, name, plot=True)
         rows[label] = result
     print()
     print(f"{'policy':<24}{'success %':>10}{'insert s':>10}{'peak N':>9}{'mean N':>9}")
@@ -331,6 +332,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         peak_force_threshold_n=args.peak_force_threshold_n,
         peak_force_signal=args.peak_force_signal,
         action_cost=args.action_cost,
+        distance_shaping=args.distance_shaping,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
@@ -452,7 +454,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         composition=args.composition,
         noise_scale=noise_scale,
     )
-    paths = write_evaluation(result, name)
+    paths = write_evaluation(result, name, plot=args.plot)
     if args.json:
         _print_json(result)
     else:
@@ -462,6 +464,34 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         )
         for path in paths.values():
             print(f"wrote {path}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from rlfd_drake.evaluate import plot_peak_forces, plot_success_panels, result_from_json
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise ValueError(f"--out must name a .png file, got {args.out!r}")
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(f"{out} exists; pass --overwrite or choose another --out")
+    labels = args.labels or [Path(path).stem for path in args.results]
+    if len(labels) != len(args.results):
+        raise ValueError(
+            f"--labels: one per result file ({len(args.results)}), got {len(labels)}: {labels}"
+        )
+    panels: dict[str, list[tuple[str, dict]]] = {}
+    for label, path in zip(labels, args.results, strict=True):
+        if not Path(path).is_file():
+            raise ValueError(f"results: no evaluation file at {path!r}")
+        try:
+            result = result_from_json(path)
+            task = result["task"]
+        except (ValueError, KeyError, TypeError) as error:
+            raise ValueError(f"results: {path!r} is not an evaluation JSON ({error})") from error
+        panels.setdefault(task, []).append((label, result))
+    draw = plot_success_panels if args.kind == "success" else plot_peak_forces
+    print(f"wrote {draw(panels, out)}")
     return 0
 
 
@@ -648,6 +678,14 @@ def build_parser() -> argparse.ArgumentParser:
         "0: the paper's sparse reward; pulls the residual to zero where the DMP suffices)",
     )
     train.add_argument(
+        "--distance-shaping",
+        type=float,
+        default=0.0,
+        help="potential-based shaping: each step gains this times the L1 distance to the "
+        "true goal it closed, per cm (discounted; optimal policies unchanged; default 0: "
+        "the paper's sparse reward)",
+    )
+    train.add_argument(
         "--scaled-observation",
         action="store_true",
         help="a fixed input layer brings the contact features (lateral position, wrist "
@@ -783,7 +821,31 @@ def build_parser() -> argparse.ArgumentParser:
         "--overwrite", action="store_true", help="replace an existing result of the same name"
     )
     evaluate.add_argument("--json", action="store_true", help="print the JSON result")
+    evaluate.add_argument(
+        "--plot",
+        action="store_true",
+        help="also write results/<name>.png, success against the start perturbation "
+        "(rlfd plot draws it, or several side by side, from the JSON later)",
+    )
     evaluate.set_defaults(func=_cmd_evaluate)
+
+    plot = sub.add_parser(
+        "plot", help="draw stored evaluations (results/eval_*.json): success or peak force"
+    )
+    plot.add_argument("results", nargs="+", help="evaluation JSON files written by evaluate")
+    plot.add_argument("--out", required=True, help="the PNG to write")
+    plot.add_argument(
+        "--labels", nargs="+", help="one legend label per file (default: the file stems)"
+    )
+    plot.add_argument(
+        "--kind",
+        choices=["success", "forces"],
+        default="success",
+        help="success against the start perturbation (paper Fig. 4), one panel per task; "
+        "or the mean peak contact forces",
+    )
+    plot.add_argument("--overwrite", action="store_true", help="replace an existing PNG")
+    plot.set_defaults(func=_cmd_plot)
 
     view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
     view.add_argument("--task", default="peg_easy")

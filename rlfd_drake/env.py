@@ -55,6 +55,8 @@ RESET_OPTIONS = ("start_dp", "start_dq", "fixture_dp", "fixture_dq", "perturbati
 
 # The pure-RL baseline's dense reward (paper Sec. V-C): alpha, beta, eps.
 DENSE_ALPHA, DENSE_BETA, DENSE_EPS = 10.0, 0.002, 1e-4
+# The distance that one unit of the distance-shaping potential stands for.
+SHAPING_DISTANCE_UNIT_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -96,9 +98,12 @@ def check_reward_terms(
     peak_force_threshold_n: float | None,
     action_cost: float = 0.0,
     peak_force_signal: str = "low_passed",
+    distance_shaping: float = 0.0,
+    discount: float = 0.99,
 ) -> None:
     """Raises a ValueError naming the field unless the reward's extra terms are valid:
-    ``force_limit_penalty``, ``peak_force_cost`` and ``action_cost`` >= 0, a peak
+    ``force_limit_penalty``, ``peak_force_cost``, ``action_cost`` and
+    ``distance_shaping`` >= 0, ``discount`` in (0, 1], a peak
     force cost with a threshold > 0 (a threshold without a cost is refused too: it
     would do nothing) and ``peak_force_signal`` in ``PEAK_FORCE_SIGNALS``."""
     if peak_force_signal not in PEAK_FORCE_SIGNALS:
@@ -107,6 +112,9 @@ def check_reward_terms(
         )
     _check_non_negative(force_limit_penalty, "force_limit_penalty")
     _check_non_negative(action_cost, "action_cost")
+    _check_non_negative(distance_shaping, "distance_shaping")
+    if not (isinstance(discount, int | float) and 0.0 < discount <= 1.0):
+        raise ValueError(f"discount must be a number in (0, 1], got {discount!r}")
     _check_non_negative(peak_force_cost, "peak_force_cost")
     cost, threshold_n = peak_force_cost, peak_force_threshold_n
     if cost > 0 and threshold_n is None:
@@ -178,6 +186,13 @@ class RlfdEnv(DrakeGymEnv):
     low-passed force, as force limits; "one_step": the 2 ms samples), ``action_cost``
     (a step's reward loses ``action_cost`` times the mean square of its clipped action:
     a residual that is not needed costs; 0 by default, the paper's reward),
+    ``distance_shaping`` and ``discount`` (potential-based shaping, Ng, Harada and
+    Russell 1999: a step's reward gains ``discount * phi(s') - phi(s)`` with
+    ``phi = -distance_shaping * L1 / 1 cm``, L1 the sum of the part's absolute position
+    errors from the true goal; it tells the learner which way the goal lies without
+    changing which policies are optimal, unlike the dense reward, whose per-step bonus
+    near the goal outweighs ending the episode by inserting; ``discount`` must be the
+    learner's; 0 by default, the paper's sparse reward),
     ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
@@ -200,6 +215,8 @@ class RlfdEnv(DrakeGymEnv):
         peak_force_threshold_n: float | None = None,
         action_cost: float = 0.0,
         peak_force_signal: str = "low_passed",
+        distance_shaping: float = 0.0,
+        discount: float = 0.99,
     ) -> None:
         self._init_args = dict(
             task=task,
@@ -211,6 +228,8 @@ class RlfdEnv(DrakeGymEnv):
             peak_force_threshold_n=peak_force_threshold_n,
             action_cost=action_cost,
             peak_force_signal=peak_force_signal,
+            distance_shaping=distance_shaping,
+            discount=discount,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -229,7 +248,12 @@ class RlfdEnv(DrakeGymEnv):
             peak_force_threshold_n,
             action_cost,
             peak_force_signal,
+            distance_shaping,
+            discount,
         )
+        self.distance_shaping = float(distance_shaping)
+        self.discount = float(discount)
+        self._potential = 0.0
         self.peak_force_signal = peak_force_signal
         self.action_cost = float(action_cost)
         self.reward_kind = reward
@@ -354,6 +378,7 @@ class RlfdEnv(DrakeGymEnv):
         self._succeeded = self._failure_reason is None and self._inserted()
         # The DMP's approach before the residual acts is not charged to it.
         self._peak_force_excess = self._excess_peak_force(self._peak_force(self.peak_force_signal))
+        self._potential = self._distance_potential()
         return observation, self._info()
 
     def _observe(self) -> np.ndarray:
@@ -421,6 +446,12 @@ class RlfdEnv(DrakeGymEnv):
             reward = -DENSE_ALPHA * l1 + DENSE_BETA / (float(np.linalg.norm(error)) + DENSE_EPS)
         if self.action_cost > 0.0:
             reward -= self.action_cost * float(np.mean(np.square(action)))
+        if self.distance_shaping > 0.0:
+            # The terminal state keeps its potential: a part that breaks the limit far
+            # from the goal scores as if it had stayed there, not as if it had arrived.
+            potential = self._distance_potential()
+            reward += self.discount * potential - self._potential
+            self._potential = potential
         # Force limits apply to the low-passed contact force (ObserverConfig).
         peak_n = self._peak_force("low_passed")
         if self.peak_force_cost > 0.0:
@@ -435,6 +466,14 @@ class RlfdEnv(DrakeGymEnv):
         terminated = success or self._force_limit_broken
         truncated = (not terminated) and context.get_time() >= self.task.episode_time_s - 1e-9
         return observation, reward, terminated, truncated, self._info()
+
+    def _distance_potential(self) -> float:
+        """phi(s) = -distance_shaping * L1(part position error) / 1 cm; 0 unshaped."""
+        if self.distance_shaping == 0.0:
+            return 0.0
+        error, _ = self._part_error()
+        l1_units = float(np.sum(np.abs(error))) / SHAPING_DISTANCE_UNIT_M
+        return -self.distance_shaping * l1_units
 
     def _part_error(self) -> tuple[np.ndarray, float]:
         """(p_WP - p_WGoal_true (3,) m, angle between R_WP and R_WGoal_true in deg)."""

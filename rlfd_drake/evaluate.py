@@ -59,6 +59,8 @@ __all__ = [
     "policy_stem",
     "trained_mode",
     "write_evaluation",
+    "plot_success_panels",
+    "plot_peak_forces",
 ]
 
 #: Keys of the dict returned by :func:`evaluate`.
@@ -603,39 +605,123 @@ def _success_curve(result: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     return x, p, std, n, label
 
 
-def plot_success_vs_perturbation(results: list[dict], path: Path) -> Path:
-    """Success rate against perturbation size (paper Fig. 4), one line per result,
-    binomial error bars; written as PNG."""
+#: More legend entries than this go below the panels, where they hide no data.
+_LEGEND_INSIDE_MAX = 3
+
+
+def _figure(n_panels: int, height: float, n_labels: int):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=100)
-    label = ""
-    for result in results:
-        x, p, std, _, label = _success_curve(result)
-        ax.errorbar(x, 100 * p, yerr=100 * std, marker="o", capsize=3, label=result["policy"])
-    ax.set_xlabel(label)
-    ax.set_ylabel("success (%)")
-    ax.set_ylim(-5, 105)
-    ax.set_title(results[0]["task"])
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    below = n_labels > _LEGEND_INSIDE_MAX
+    legend_in = 0.2 * ((n_labels + 1) // 2) + 0.2 if below else 0.0
+    fig, axes = plt.subplots(
+        1, n_panels, figsize=(5.0 * n_panels, height + legend_in), dpi=100, squeeze=False
+    )
+    return plt, fig, list(axes[0]), legend_in
+
+
+def _save(plt, fig, axes, path: Path, legend_in: float) -> Path:
+    if legend_in:
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.tight_layout(rect=(0, legend_in / fig.get_figheight(), 1, 1))
+        fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=7, frameon=False)
+    else:
+        for ax in axes:
+            ax.legend(fontsize=7)
+        fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
     return compact_png(path)
 
 
-def write_evaluation(result: dict, name: str, command: str | None = None) -> dict[str, Path]:
+def _check_panels(panels: dict[str, list[tuple[str, dict]]], what: str) -> int:
+    """The number of distinct labels; refuses an empty figure or panel."""
+    if not panels or not all(panels.values()):
+        raise ValueError(f"{what} needs evaluations in every panel, got {panels}")
+    return len({label for labelled in panels.values() for label, _ in labelled})
+
+
+def plot_success_vs_perturbation(results: list[dict], path: Path) -> Path:
+    """Success rate against perturbation size (paper Fig. 4), one line per result,
+    binomial error bars; written as PNG."""
+    return plot_success_panels(
+        {results[0]["task"]: [(result["policy"], result) for result in results]}, path
+    )
+
+
+def plot_success_panels(panels: dict[str, list[tuple[str, dict]]], path: Path) -> Path:
+    """Success against perturbation size (paper Fig. 4), one panel per title (a task),
+    one line per labelled evaluation with its binomial error bars; written as PNG.
+    A label keeps its colour in every panel."""
+    n_labels = _check_panels(panels, "plot_success_panels")
+    plt, fig, axes, legend_in = _figure(len(panels), 3.4, n_labels)
+    colours: dict[str, str] = {}
+    for ax, (title, labelled) in zip(axes, panels.items(), strict=True):
+        label = ""
+        for name, result in labelled:
+            x, p, std, _, label = _success_curve(result)
+            colour = colours.setdefault(name, f"C{len(colours) % 10}")
+            ax.errorbar(x, 100 * p, yerr=100 * std, marker="o", capsize=3, label=name, color=colour)
+        ax.set_xlabel(label)
+        ax.set_ylabel("success (%)")
+        ax.set_ylim(-5, 105)
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    if legend_in:  # one entry per label, taken from the panel that has them all
+        axes.sort(key=lambda ax: -len(ax.get_legend_handles_labels()[1]))
+    return _save(plt, fig, axes, path, legend_in)
+
+
+def plot_peak_forces(panels: dict[str, list[tuple[str, dict]]], path: Path) -> Path:
+    """Mean peak contact force per labelled evaluation, one panel per title (a task),
+    the labels down a shared axis: the one-step (2 ms) peak and, where stored, the
+    20 ms low-passed peak; PNG."""
+    _check_panels(panels, "plot_peak_forces")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(dict.fromkeys(name for labelled in panels.values() for name, _ in labelled))
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(3.0 + 3.0 * len(panels), 1.4 + 0.3 * len(names)),
+        dpi=100,
+        sharey=True,
+        squeeze=False,
+    )
+    axes = list(axes[0])
+    for ax, (title, labelled) in zip(axes, panels.items(), strict=True):
+        y = np.array([names.index(name) for name, _ in labelled], dtype=float)
+        peak = [result["peak_force_n"] for _, result in labelled]
+        low_passed = [result.get("peak_low_passed_force_n") or 0.0 for _, result in labelled]
+        ax.barh(y - 0.2, peak, height=0.4, label="peak (2 ms)")
+        ax.barh(y + 0.2, low_passed, height=0.4, label="peak, 20 ms low-passed")
+        ax.set_xlabel("mean peak contact force (N)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3, axis="x")
+    axes[0].set_yticks(np.arange(len(names)), names, fontsize=7)
+    axes[0].invert_yaxis()
+    return _save(plt, fig, axes[:1], path, 0.0)
+
+
+def write_evaluation(
+    result: dict, name: str, command: str | None = None, plot: bool = False
+) -> dict[str, Path]:
     """Writes ``results/<name>.json`` (via ``results.write_result``: command, seed,
-    date), ``results/<name>.md`` and ``results/<name>.png``; returns their paths."""
+    date), ``results/<name>.md`` and, with ``plot``, ``results/<name>.png`` (the JSON
+    keeps what any plot needs: ``rlfd plot`` draws it later); returns their paths."""
     json_path = write_result(name, result, seed=result.get("seed"), command=command)
     md_path = results_dir() / f"{name}.md"
     md_path.write_text(evaluation_markdown(result))
-    png_path = plot_success_vs_perturbation([result], results_dir() / f"{name}.png")
-    return {"json": json_path, "md": md_path, "png": png_path}
+    paths = {"json": json_path, "md": md_path}
+    if plot:
+        paths["png"] = plot_success_vs_perturbation([result], results_dir() / f"{name}.png")
+    return paths
 
 
 def policy_stem(spec: str) -> str:

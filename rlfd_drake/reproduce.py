@@ -711,13 +711,15 @@ def stored_or_new_evaluation(
 
 def _cell(
     row: Row, task: str, budget: str, seed: int, workers: int, metric: str = "success"
-) -> dict:
+) -> tuple[dict, dict | None]:
+    """The table cell of ``row`` on ``task`` and the evaluation it reports (None
+    when not run)."""
     from rlfd_drake.evaluate import NAMED_POLICIES, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
     kind, _, detail = row.source.partition(":")
     if kind == "none":
-        return {"status": "not run", "reason": detail}
+        return {"status": "not run", "reason": detail}, None
     if kind in NAMED_POLICIES:
         policy, label, trained = kind, kind, None
         missing = None  # nothing to look for on disk
@@ -784,9 +786,9 @@ def _cell(
         _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
         result = evaluation(True)
     if result is None:
-        return {"status": "not run", "reason": missing}
+        return {"status": "not run", "reason": missing}, None
     by_outcome = result.get("forces_by_outcome", {})
-    return {
+    cell = {
         "status": "measured",
         "success_pct": 100 * result["success_rate"],
         "success_std_pct": 100 * result["success_std"],
@@ -801,6 +803,7 @@ def _cell(
         "training_episodes": trained,
         "result_file": f"{name}.json",
     }
+    return cell, result
 
 
 _METRIC_TEXT = {
@@ -886,22 +889,50 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
     return "\n".join(lines) + "\n"
 
 
+def _plot(table: Table, evaluations: dict[str, dict[str, dict | None]], path: Path) -> Path | None:
+    """The table's figure from its measured cells' evaluations (row label -> column
+    -> evaluation): success against the start perturbation (paper Fig. 4) per column,
+    or, for a force table, the rows' peak forces per column (residual vs hybrid vs
+    DMP vs pure RL); None when no cell is measured."""
+    from rlfd_drake.evaluate import plot_peak_forces, plot_success_panels
+
+    panels = {
+        column: [
+            (row.label, result)
+            for row in table.rows
+            if (result := evaluations[row.label][column]) is not None
+        ]
+        for column in table.columns
+    }
+    panels = {column: labelled for column, labelled in panels.items() if labelled}
+    if not panels:
+        return None
+    draw = plot_peak_forces if table.metric == "peak_force" else plot_success_panels
+    return draw(panels, path)
+
+
 def reproduce_table(number: str, budget: str = "quick", seed: int = 0, workers: int = 2) -> dict:
-    """Measures every runnable cell of table ``number``; writes results/table_<n>.{md,json}."""
+    """Measures every runnable cell of table ``number``; writes
+    results/table_<n>.{md,json,png} (the figure: see ``_plot``)."""
     if number not in TABLES:
         raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {sorted(BUDGETS)}, got {budget!r}")
     table = TABLES[number]
     print(f"{table.title} (budget {budget})", flush=True)
-    cells = {
+    measured = {
         row.label: {
             column: _cell(row, task, budget, seed, workers, table.metric)
             for column, task in table.columns.items()
         }
         for row in table.rows
     }
+    cells = {label: {c: cell for c, (cell, _) in row.items()} for label, row in measured.items()}
+    evaluations = {label: {c: r for c, (_, r) in row.items()} for label, row in measured.items()}
     markdown = _markdown(table, cells, budget, seed)
+    plot = _plot(table, evaluations, results_dir() / f"table_{number}.png")
+    if plot is not None:
+        markdown += f"\n![{table.title}]({plot.name})\n"
     (results_dir() / f"table_{number}.md").write_text(markdown)
     data = {
         "title": table.title,

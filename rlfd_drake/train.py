@@ -56,6 +56,8 @@ from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.tasks import load_task
 
 ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
+# Every algorithm's discount factor; the distance shaping must use the same one.
+DISCOUNT = 0.99
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,10 @@ class TrainConfig:
             each 0.1 s step, whose offsets average out before they move the part as far
             as a missed hole is off).
         sac_correlated_noise_time_s: that noise's correlation time, s.
+        distance_shaping: the weight of a potential-based shaping term that pays
+            each step for the distance to the true goal it closed, per cm of L1
+            position error (``RlfdEnv``), discounted at the learner's ``DISCOUNT``;
+            optimal policies are unchanged; 0 = the paper's sparse reward.
     """
 
     task: str = "peg_easy"
@@ -171,6 +177,7 @@ class TrainConfig:
     applied_action_only: bool = False
     sac_correlated_noise: float | tuple[float, ...] = (0.0,)
     sac_correlated_noise_time_s: float = 2.0
+    distance_shaping: float = 0.0
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -254,6 +261,8 @@ class TrainConfig:
             self.peak_force_threshold_n,
             self.action_cost,
             self.peak_force_signal,
+            self.distance_shaping,
+            DISCOUNT,
         )
 
 
@@ -271,6 +280,8 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "peak_force_threshold_n": config.peak_force_threshold_n,
         "peak_force_signal": config.peak_force_signal,
         "action_cost": config.action_cost,
+        "distance_shaping": config.distance_shaping,
+        "discount": DISCOUNT,
     }
 
 
@@ -384,7 +395,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             n_epochs=10,
-            gamma=0.99,
+            gamma=DISCOUNT,
             policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **inputs),
             **common,
         )
@@ -398,7 +409,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             learning_starts=config.sac_learning_starts,
             train_freq=(1, "step"),
             gradient_steps=config.sac_gradient_steps,
-            gamma=0.99,
+            gamma=DISCOUNT,
             # SB3's default starts the entropy coefficient at 1.0, which against a
             # sparse reward of 1 per episode made the entropy bonus dominate: the
             # policy widened until its residuals knocked the part off the hole
@@ -425,7 +436,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             "MlpLstmPolicy",
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
-            gamma=0.99,
+            gamma=DISCOUNT,
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
             **common,
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -34,6 +35,11 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     assert "rlfd: error" in capsys.readouterr().err
     assert main(["train", "--task", "peg_huge", "--episodes", "1"]) == 2
     assert "task must be one of" in capsys.readouterr().err
+    out = tmp_path / "shaped"
+    args = ["train", "--distance-shaping", "-1", "--episodes", "1", "--out", str(out)]
+    assert main(args) == 2
+    assert "distance_shaping must be a number >= 0, got -1.0" in capsys.readouterr().err
+    assert not out.exists()
     with pytest.raises(SystemExit):
         main(["train", "--algo", "dqn"])
 
@@ -144,3 +150,33 @@ def test_the_shipped_policy_records_its_translation_only_training():
     assert trained_mode(str(shipped)) == "translation"  # what make demo runs it in
     command = json.loads(training_config_file(shipped).read_text())["command"]
     assert "--residual-mode translation" in command and "--task peg_easy" in command
+
+
+def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
+    """rlfd plot: the stored evaluations, one panel per task, without running anything."""
+    from PIL import Image
+
+    results = Path(__file__).resolve().parents[1] / "results"
+    stored = [str(results / f"eval_{name}_n40_s0.json") for name in ("gear_dmp", "rj45_dmp")]
+    stored.append(str(results / "eval_rj45_force_search_n40_s0.json"))
+    out = tmp_path / "cmp.png"
+    assert main(["plot", *stored, "--out", str(out)]) == 0
+    with Image.open(out) as plot:  # gear and rj45: two panels
+        assert plot.size == (1000, 340)
+    before = out.read_bytes()
+    assert main(["plot", *stored, "--out", str(out)]) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    forces = tmp_path / "forces.png"
+    assert main(["plot", *stored, "--kind", "forces", "--out", str(forces)]) == 0
+    assert forces.read_bytes()[:4] == b"\x89PNG"
+    for argv, message in (
+        ([*stored, "--labels", "a", "b"], "--labels: one per result file (3), got 2"),
+        ([str(results / "table_1.json")], "is not an evaluation JSON"),
+        ([str(tmp_path / "none.json")], "results: no evaluation file at"),
+    ):
+        assert main(["plot", *argv, "--out", str(tmp_path / "x.png")]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["plot", stored[0], "--out", str(tmp_path / "x.svg")]) == 2
+    assert "--out must name a .png file, got" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()

@@ -86,6 +86,9 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
     old = {**dmp_result, "episode_table": dict(dmp_result["episode_table"])}
     del old["episode_table"]["peak_force_time_s"], old["episode_table"]["peak_force_distance_mm"]
     assert "peak force felt" not in evaluation_markdown(old)
+    assert set(paths) == {"json", "md"}  # no plot unless asked: results/ stays small
+    assert not (tmp_path / "results" / "eval_test.png").exists()
+    paths = write_evaluation(dmp_result, "eval_test", command="rlfd evaluate test", plot=True)
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"
     assert all(p.stat().st_size < 100_000 for p in paths.values())
     from PIL import Image

@@ -39,6 +39,10 @@ def _fake_evaluation(
         "peak_joint_contact_torque_nm": 2.5,
         "peak_low_passed_force_n": 20.0,
         "episodes": episodes,
+        "per_bin": [
+            {"rotation_offset_deg": 0.0, "position_offset_m": d, "success_rate": rate, "n": 4}
+            for d in (0.005, 0.01)
+        ],
     }
 
 
@@ -64,6 +68,15 @@ def test_reproduce_table_writes_paper_and_ours_side_by_side(tmp_path, monkeypatc
     assert "| A  DMP | 24.0 | 50.0 +- 5.0 | 8.0 | 50.0 +- 5.0 | n/a |" in markdown
     stored = json.loads((tmp_path / "results" / "table_1.json").read_text())
     assert stored["seed"] == 0 and "command" in stored
+    # The figure: success against the perturbation, one panel per column, linked.
+    assert "![" in markdown and "](table_1.png)" in markdown
+    png = tmp_path / "results" / "table_1.png"
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    from PIL import Image
+
+    with Image.open(png) as plot:  # the legend of the table's many rows below the panels
+        width, height = plot.size
+        assert width == 500 * len(reproduce.TABLES["1"].columns) and height > 340
 
 
 def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
@@ -113,6 +126,8 @@ def test_reproduce_rejects_unknown_tables_and_budgets(table, budget):
 
 
 def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeypatch):
+    from PIL import Image
+
     monkeypatch.chdir(tmp_path)
     calls = []
 
@@ -133,6 +148,9 @@ def test_insertion_time_and_force_tables_reuse_the_evaluations(tmp_path, monkeyp
         "| A  DMP | n/a | 40 (30 / -); LP 20; 2.5 N m | n/a | 40 (30 / -); LP 20; 2.5 N m | n/a |"
         in (tmp_path / "results" / "table_forces.md").read_text()
     )
+    with Image.open(tmp_path / "results" / "table_forces.png") as plot:  # bars per column
+        assert plot.size[0] == 300 + 300 * len(reproduce.TABLES["forces"].columns)
+    assert "](table_forces.png)" in (tmp_path / "results" / "table_forces.md").read_text()
     # Table V's evaluations are Table IV's: same result names.
     assert all(name.startswith("eval_") for name in calls)
 

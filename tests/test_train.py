@@ -329,6 +329,53 @@ def test_action_cost_charges_each_step_its_mean_square_action():
             TrainConfig(action_cost=bad)
 
 
+def test_distance_shaping_pays_the_discounted_change_of_the_distance_potential():
+    """--distance-shaping C: a step's reward is the paper's plus gamma * phi(s') - phi(s),
+    phi = -C * L1(part position error) / 1 cm, from the true goal; the simulation is the
+    same. Summed over an episode it telescopes (gamma = 1): the reward for a path is
+    C per cm of L1 distance it closed, whatever the path."""
+    from rlfd_drake.train import DISCOUNT, _env_kwargs
+
+    options = {"start_dp": np.zeros(3), "start_dq": np.array([1.0, 0.0, 0.0, 0.0])}
+    options["fixture_dp"] = np.array([0.002, -0.001, 0.0])
+    action = np.array([0.3, -0.2, 0.5, 0.0, 0.0, 0.0], np.float32)
+
+    def l1_cm(env: RlfdEnv) -> float:
+        error, _ = env._part_error()
+        return float(np.sum(np.abs(error))) / 0.01
+
+    def steps(**shaping) -> tuple[list[float], list[float], np.ndarray]:
+        env = RlfdEnv(**{**_env_kwargs(TrainConfig(task="peg_easy")), **shaping})
+        env.reset(seed=0, options=options)
+        distances, rewards = [l1_cm(env)], []
+        for _ in range(4):
+            observation, reward, *_ = env.step(action)
+            rewards.append(reward)
+            distances.append(l1_cm(env))
+        return rewards, distances, observation
+
+    paper, distances, paper_observation = steps()
+    shaped, _, shaped_observation = steps(distance_shaping=2.0, discount=DISCOUNT)
+    np.testing.assert_array_equal(shaped_observation, paper_observation)
+    assert distances[-1] < distances[0] - 0.5  # the DMP closes the distance
+    for k, (p, s) in enumerate(zip(paper, shaped, strict=True)):
+        expected = -2.0 * DISCOUNT * distances[k + 1] + 2.0 * distances[k]
+        assert s - p == pytest.approx(expected, rel=1e-9)
+    undiscounted, _, _ = steps(distance_shaping=2.0, discount=1.0)
+    closed = sum(u - p for u, p in zip(undiscounted, paper, strict=True))
+    assert closed == pytest.approx(2.0 * (distances[0] - distances[-1]), rel=1e-9)
+    for field, bad, message in (
+        ("distance_shaping", -1.0, "distance_shaping must be a number >= 0, got -1.0"),
+        ("distance_shaping", float("nan"), "distance_shaping must be a number >= 0, got nan"),
+        ("discount", 0.0, "discount must be a number in (0, 1], got 0.0"),
+        ("discount", 1.5, "discount must be a number in (0, 1], got 1.5"),
+    ):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            RlfdEnv("peg_easy", **{field: bad})
+    with pytest.raises(ValueError, match="distance_shaping must be a number >= 0, got -0.5"):
+        TrainConfig(distance_shaping=-0.5)
+
+
 def test_deployed_policy_matches_the_frame_stacked_training_view():
     from stable_baselines3.common.vec_env import VecFrameStack
 
