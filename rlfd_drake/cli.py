@@ -333,6 +333,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         peak_force_signal=args.peak_force_signal,
         action_cost=args.action_cost,
         distance_shaping=args.distance_shaping,
+        distance_shaping_axes=args.distance_shaping_axes,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
@@ -684,6 +685,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="potential-based shaping: each step gains this times the L1 distance to the "
         "true goal it closed, per cm (discounted; optimal policies unchanged; default 0: "
         "the paper's sparse reward)",
+    )
+    train.add_argument(
+        "--distance-shaping-axes",
+        choices=["all", "lateral"],
+        default="all",
+        help="the position errors the shaping counts: all three, or the two across the "
+        "insertion axis (lifting to slide sideways then costs nothing)",
     )
     train.add_argument(
         "--scaled-observation",

@@ -57,6 +57,9 @@ RESET_OPTIONS = ("start_dp", "start_dq", "fixture_dp", "fixture_dq", "perturbati
 DENSE_ALPHA, DENSE_BETA, DENSE_EPS = 10.0, 0.002, 1e-4
 # The distance that one unit of the distance-shaping potential stands for.
 SHAPING_DISTANCE_UNIT_M = 0.01
+# "all": the three position errors; "lateral": the two across the insertion axis (the
+# true goal frame's x and y), so that lifting to slide sideways costs nothing.
+SHAPING_AXES = ("all", "lateral")
 
 
 @dataclass(frozen=True)
@@ -100,10 +103,12 @@ def check_reward_terms(
     peak_force_signal: str = "low_passed",
     distance_shaping: float = 0.0,
     discount: float = 0.99,
+    distance_shaping_axes: str = "all",
 ) -> None:
     """Raises a ValueError naming the field unless the reward's extra terms are valid:
     ``force_limit_penalty``, ``peak_force_cost``, ``action_cost`` and
-    ``distance_shaping`` >= 0, ``discount`` in (0, 1], a peak
+    ``distance_shaping`` >= 0, ``discount`` in (0, 1], ``distance_shaping_axes`` in
+    ``SHAPING_AXES`` (other than "all" only with shaping), a peak
     force cost with a threshold > 0 (a threshold without a cost is refused too: it
     would do nothing) and ``peak_force_signal`` in ``PEAK_FORCE_SIGNALS``."""
     if peak_force_signal not in PEAK_FORCE_SIGNALS:
@@ -115,6 +120,14 @@ def check_reward_terms(
     _check_non_negative(distance_shaping, "distance_shaping")
     if not (isinstance(discount, int | float) and 0.0 < discount <= 1.0):
         raise ValueError(f"discount must be a number in (0, 1], got {discount!r}")
+    if distance_shaping_axes not in SHAPING_AXES:
+        raise ValueError(
+            f"distance_shaping_axes must be one of {SHAPING_AXES}, got {distance_shaping_axes!r}"
+        )
+    if distance_shaping_axes != "all" and distance_shaping == 0:
+        raise ValueError(
+            f"distance_shaping_axes {distance_shaping_axes!r} needs distance_shaping > 0"
+        )
     _check_non_negative(peak_force_cost, "peak_force_cost")
     cost, threshold_n = peak_force_cost, peak_force_threshold_n
     if cost > 0 and threshold_n is None:
@@ -192,7 +205,9 @@ class RlfdEnv(DrakeGymEnv):
     errors from the true goal; it tells the learner which way the goal lies without
     changing which policies are optimal, unlike the dense reward, whose per-step bonus
     near the goal outweighs ending the episode by inserting; ``discount`` must be the
-    learner's; 0 by default, the paper's sparse reward),
+    learner's; 0 by default, the paper's sparse reward; ``distance_shaping_axes``
+    "lateral" counts only the errors across the insertion axis, in the true goal's
+    frame),
     ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
@@ -217,6 +232,7 @@ class RlfdEnv(DrakeGymEnv):
         peak_force_signal: str = "low_passed",
         distance_shaping: float = 0.0,
         discount: float = 0.99,
+        distance_shaping_axes: str = "all",
     ) -> None:
         self._init_args = dict(
             task=task,
@@ -230,6 +246,7 @@ class RlfdEnv(DrakeGymEnv):
             peak_force_signal=peak_force_signal,
             distance_shaping=distance_shaping,
             discount=discount,
+            distance_shaping_axes=distance_shaping_axes,
             perturbation_scale=perturbation_scale,
             diagram_config=diagram_config,
             render_mode=render_mode,
@@ -250,8 +267,10 @@ class RlfdEnv(DrakeGymEnv):
             peak_force_signal,
             distance_shaping,
             discount,
+            distance_shaping_axes,
         )
         self.distance_shaping = float(distance_shaping)
+        self.distance_shaping_axes = distance_shaping_axes
         self.discount = float(discount)
         self._potential = 0.0
         self.peak_force_signal = peak_force_signal
@@ -468,10 +487,13 @@ class RlfdEnv(DrakeGymEnv):
         return observation, reward, terminated, truncated, self._info()
 
     def _distance_potential(self) -> float:
-        """phi(s) = -distance_shaping * L1(part position error) / 1 cm; 0 unshaped."""
+        """phi(s) = -distance_shaping * L1(part position error) / 1 cm, over the axes
+        ``distance_shaping_axes`` names; 0 unshaped."""
         if self.distance_shaping == 0.0:
             return 0.0
         error, _ = self._part_error()
+        if self.distance_shaping_axes == "lateral":
+            error = (self.rlfd.scene.X_WGoal.rotation().inverse() @ error)[:2]
         l1_units = float(np.sum(np.abs(error))) / SHAPING_DISTANCE_UNIT_M
         return -self.distance_shaping * l1_units
 

@@ -142,6 +142,8 @@ class TrainConfig:
             each step for the distance to the true goal it closed, per cm of L1
             position error (``RlfdEnv``), discounted at the learner's ``DISCOUNT``;
             optimal policies are unchanged; 0 = the paper's sparse reward.
+        distance_shaping_axes: "all" position errors, or the "lateral" two across
+            the insertion axis (lifting to slide sideways then costs nothing).
     """
 
     task: str = "peg_easy"
@@ -178,6 +180,7 @@ class TrainConfig:
     sac_correlated_noise: float | tuple[float, ...] = (0.0,)
     sac_correlated_noise_time_s: float = 2.0
     distance_shaping: float = 0.0
+    distance_shaping_axes: str = "all"
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -263,6 +266,7 @@ class TrainConfig:
             self.peak_force_signal,
             self.distance_shaping,
             DISCOUNT,
+            self.distance_shaping_axes,
         )
 
 
@@ -282,6 +286,7 @@ def _env_kwargs(config: TrainConfig) -> dict:
         "action_cost": config.action_cost,
         "distance_shaping": config.distance_shaping,
         "discount": DISCOUNT,
+        "distance_shaping_axes": config.distance_shaping_axes,
     }
 
 

@@ -364,6 +364,21 @@ def test_distance_shaping_pays_the_discounted_change_of_the_distance_potential()
     undiscounted, _, _ = steps(distance_shaping=2.0, discount=1.0)
     closed = sum(u - p for u, p in zip(undiscounted, paper, strict=True))
     assert closed == pytest.approx(2.0 * (distances[0] - distances[-1]), rel=1e-9)
+    # "lateral": only the errors across the insertion axis (the true goal frame's x, y).
+    lateral_config = TrainConfig(
+        task="peg_easy", distance_shaping=2.0, distance_shaping_axes="lateral"
+    )
+    lateral_env = RlfdEnv(**{**_env_kwargs(lateral_config), "discount": 1.0})
+    lateral_env.reset(seed=0, options=options)
+    R_GoalW = lateral_env.rlfd.scene.X_WGoal.rotation().inverse().matrix()
+    error, _ = lateral_env._part_error()
+    lateral_cm = float(np.sum(np.abs((R_GoalW @ error)[:2]))) / 0.01
+    assert lateral_env._potential == pytest.approx(-2.0 * lateral_cm, rel=1e-12)
+    assert 0.0 < lateral_cm < 0.5 * distances[0]  # the height is most of the distance
+    with pytest.raises(ValueError, match="distance_shaping_axes 'lateral' needs distance_sha"):
+        TrainConfig(distance_shaping_axes="lateral")
+    with pytest.raises(ValueError, match="distance_shaping_axes must be one of"):
+        RlfdEnv("peg_easy", distance_shaping=1.0, distance_shaping_axes="z")
     for field, bad, message in (
         ("distance_shaping", -1.0, "distance_shaping must be a number >= 0, got -1.0"),
         ("distance_shaping", float("nan"), "distance_shaping must be a number >= 0, got nan"),
