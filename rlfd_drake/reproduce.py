@@ -535,6 +535,9 @@ TABLES["forces"] = Table(
             for row in TABLES["2"].rows
             if row.source in ("random", "force_search", "baseline:linear")
         ]
+        # Table III's pure RL and hybrid: the force figure's residual vs hybrid vs DMP
+        # vs pure RL.
+        + [row for row in TABLES["3"].rows if row.composition != "residual"]
     ],
     "The paper reports forces qualitatively: rLfD feels forces comparable to the DMP's.",
     metric="peak_force",
