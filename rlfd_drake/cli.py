@@ -683,8 +683,9 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="potential-based shaping: each step gains this times the L1 distance to the "
-        "true goal it closed, per cm (discounted; optimal policies unchanged; default 0: "
-        "the paper's sparse reward)",
+        "true goal it closed, per cm (potential-based, discounted: it leaves the best "
+        "policies as they were, except that a force-limit break also pays its remaining "
+        "distance; default 0: the paper's sparse reward)",
     )
     train.add_argument(
         "--distance-shaping-axes",

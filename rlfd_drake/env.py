@@ -202,12 +202,15 @@ class RlfdEnv(DrakeGymEnv):
     ``distance_shaping`` and ``discount`` (potential-based shaping, Ng, Harada and
     Russell 1999: a step's reward gains ``discount * phi(s') - phi(s)`` with
     ``phi = -distance_shaping * L1 / 1 cm``, L1 the sum of the part's absolute position
-    errors from the true goal; it tells the learner which way the goal lies without
-    changing which policies are optimal, unlike the dense reward, whose per-step bonus
-    near the goal outweighs ending the episode by inserting; ``discount`` must be the
-    learner's; 0 by default, the paper's sparse reward; ``distance_shaping_axes``
-    "lateral" counts only the errors across the insertion axis, in the true goal's
-    frame),
+    errors from the true goal; it tells the learner which way the goal lies, and over
+    an episode it sums to ``discount**T * phi(s_T) - phi(s_0)``: where episodes end at
+    the goal (success, phi ~ 0) or run out of time (bootstrapped) the optimal policies
+    stay the paper's; an episode that breaks the force limit keeps the potential where
+    it broke, i.e. also pays for the distance it had left. Unlike the dense reward,
+    whose per-step bonus near the goal outweighs ending the episode by inserting.
+    ``discount`` must be the learner's; 0 by default, the paper's sparse reward;
+    ``distance_shaping_axes`` "lateral" counts only the errors across the insertion
+    axis, in the true goal's frame),
     ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
@@ -466,8 +469,8 @@ class RlfdEnv(DrakeGymEnv):
         if self.action_cost > 0.0:
             reward -= self.action_cost * float(np.mean(np.square(action)))
         if self.distance_shaping > 0.0:
-            # The terminal state keeps its potential: a part that breaks the limit far
-            # from the goal scores as if it had stayed there, not as if it had arrived.
+            # A terminal state keeps its potential (not the textbook 0): a part that
+            # breaks the limit far from the goal must not score as if it had arrived.
             potential = self._distance_potential()
             reward += self.discount * potential - self._potential
             self._potential = potential

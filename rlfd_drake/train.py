@@ -141,7 +141,9 @@ class TrainConfig:
         distance_shaping: the weight of a potential-based shaping term that pays
             each step for the distance to the true goal it closed, per cm of L1
             position error (``RlfdEnv``), discounted at the learner's ``DISCOUNT``;
-            optimal policies are unchanged; 0 = the paper's sparse reward.
+            it leaves the optimal policies of episodes that end at the goal or time
+            out unchanged (a force-limit break also pays its remaining distance);
+            0 = the paper's sparse reward.
         distance_shaping_axes: "all" position errors, or the "lateral" two across
             the insertion axis (lifting to slide sideways then costs nothing).
     """
