@@ -689,10 +689,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--distance-shaping-axes",
-        choices=["all", "lateral"],
+        choices=["all", "lateral", "lateral_depth"],
         default="all",
-        help="the position errors the shaping counts: all three, or the two across the "
-        "insertion axis (lifting to slide sideways then costs nothing)",
+        help="the position errors the shaping counts: all three; the two across the "
+        "insertion axis (lifting to slide sideways then costs nothing); or those and the "
+        "depth still to go once inside the fixture",
     )
     train.add_argument(
         "--scaled-observation",

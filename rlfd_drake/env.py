@@ -58,8 +58,10 @@ DENSE_ALPHA, DENSE_BETA, DENSE_EPS = 10.0, 0.002, 1e-4
 # The distance that one unit of the distance-shaping potential stands for.
 SHAPING_DISTANCE_UNIT_M = 0.01
 # "all": the three position errors; "lateral": the two across the insertion axis (the
-# true goal frame's x and y), so that lifting to slide sideways costs nothing.
-SHAPING_AXES = ("all", "lateral")
+# true goal frame's x and y), so that lifting to slide sideways costs nothing;
+# "lateral_depth": those and the depth still to go once inside the fixture (the axial
+# error capped at the fixture's depth), so that the last millimetres pay too.
+SHAPING_AXES = ("all", "lateral", "lateral_depth")
 
 
 @dataclass(frozen=True)
@@ -210,7 +212,8 @@ class RlfdEnv(DrakeGymEnv):
     whose per-step bonus near the goal outweighs ending the episode by inserting.
     ``discount`` must be the learner's; 0 by default, the paper's sparse reward;
     ``distance_shaping_axes`` "lateral" counts only the errors across the insertion
-    axis, in the true goal's frame),
+    axis, in the true goal's frame, "lateral_depth" those and the axial error capped
+    at the fixture's depth),
     ``diagram_config`` (RlfdDiagramConfig),
     ``render_mode`` (None | "ansi" | "human": Meshcat), ``info_handler``
     (callable(simulator) -> dict merged into ``info``).
@@ -495,8 +498,12 @@ class RlfdEnv(DrakeGymEnv):
         if self.distance_shaping == 0.0:
             return 0.0
         error, _ = self._part_error()
-        if self.distance_shaping_axes == "lateral":
-            error = (self.rlfd.scene.X_WGoal.rotation().inverse() @ error)[:2]
+        if self.distance_shaping_axes != "all":
+            error_goal = self.rlfd.scene.X_WGoal.rotation().inverse() @ error
+            error = error_goal[:2]
+            if self.distance_shaping_axes == "lateral_depth":
+                depth = min(abs(float(error_goal[2])), self.task.fixture.depth_m)
+                error = np.append(error, depth)
         l1_units = float(np.sum(np.abs(error))) / SHAPING_DISTANCE_UNIT_M
         return -self.distance_shaping * l1_units
 

@@ -144,8 +144,9 @@ class TrainConfig:
             it leaves the optimal policies of episodes that end at the goal or time
             out unchanged (a force-limit break also pays its remaining distance);
             0 = the paper's sparse reward.
-        distance_shaping_axes: "all" position errors, or the "lateral" two across
-            the insertion axis (lifting to slide sideways then costs nothing).
+        distance_shaping_axes: "all" position errors, the "lateral" two across
+            the insertion axis (lifting to slide sideways then costs nothing), or
+            "lateral_depth": those and the depth still to go inside the fixture.
     """
 
     task: str = "peg_easy"

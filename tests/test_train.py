@@ -14,7 +14,7 @@ from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from rlfd_drake.diagram import RlfdDiagramConfig
-from rlfd_drake.env import RlfdEnv
+from rlfd_drake.env import SHAPING_AXES, RlfdEnv
 from rlfd_drake.train import EveryNEpisodes, TrainConfig, load_model, make_model, train
 
 FAST = RlfdDiagramConfig(residual_activation_s=0.3)
@@ -375,6 +375,19 @@ def test_distance_shaping_pays_the_discounted_change_of_the_distance_potential()
     lateral_cm = float(np.sum(np.abs((R_GoalW @ error)[:2]))) / 0.01
     assert lateral_env._potential == pytest.approx(-2.0 * lateral_cm, rel=1e-12)
     assert 0.0 < lateral_cm < 0.5 * distances[0]  # the height is most of the distance
+    # "lateral_depth": and the axial error capped at the fixture's depth (the part is
+    # still above the hole here: the whole depth counts, not the height above it).
+    depth_config = replace(lateral_config, distance_shaping_axes="lateral_depth")
+    depth_env = RlfdEnv(**{**_env_kwargs(depth_config), "discount": 1.0})
+    depth_env.reset(seed=0, options=options)
+    depth_cm = depth_env.task.fixture.depth_m / 0.01
+    assert abs((R_GoalW @ error)[2]) / 0.01 > depth_cm
+    assert depth_env._potential == pytest.approx(-2.0 * (lateral_cm + depth_cm), rel=1e-12)
+    from rlfd_drake.cli import build_parser
+
+    train_parser = build_parser()._subparsers._group_actions[0].choices["train"]
+    axes = next(a for a in train_parser._actions if a.dest == "distance_shaping_axes")
+    assert tuple(axes.choices) == SHAPING_AXES
     with pytest.raises(ValueError, match="distance_shaping_axes 'lateral' needs distance_sha"):
         TrainConfig(distance_shaping_axes="lateral")
     with pytest.raises(ValueError, match="distance_shaping_axes must be one of"):
