@@ -609,12 +609,18 @@ def _success_curve(result: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 _LEGEND_INSIDE_MAX = 3
 
 
-def _figure(n_panels: int, height: float, n_labels: int):
+def _pyplot():
+    """matplotlib's pyplot on the file-only Agg backend (no display here)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _figure(n_panels: int, height: float, n_labels: int):
+    plt = _pyplot()
     below = n_labels > _LEGEND_INSIDE_MAX
     legend_in = 0.2 * ((n_labels + 1) // 2) + 0.2 if below else 0.0
     fig, axes = plt.subplots(
@@ -640,7 +646,8 @@ def _save(plt, fig, axes, path: Path, legend_in: float) -> Path:
 def _check_panels(panels: dict[str, list[tuple[str, dict]]], what: str) -> int:
     """The number of distinct labels; refuses an empty figure or panel."""
     if not panels or not all(panels.values()):
-        raise ValueError(f"{what} needs evaluations in every panel, got {panels}")
+        counts = {title: len(labelled) for title, labelled in panels.items()}
+        raise ValueError(f"{what} needs evaluations in every panel, got {counts}")
     return len({label for labelled in panels.values() for label, _ in labelled})
 
 
@@ -680,11 +687,7 @@ def plot_peak_forces(panels: dict[str, list[tuple[str, dict]]], path: Path) -> P
     the labels down a shared axis: the one-step (2 ms) peak and, where stored, the
     20 ms low-passed peak; PNG."""
     _check_panels(panels, "plot_peak_forces")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     names = list(dict.fromkeys(name for labelled in panels.values() for name, _ in labelled))
     fig, axes = plt.subplots(
         1,
@@ -698,7 +701,11 @@ def plot_peak_forces(panels: dict[str, list[tuple[str, dict]]], path: Path) -> P
     for ax, (title, labelled) in zip(axes, panels.items(), strict=True):
         y = np.array([names.index(name) for name, _ in labelled], dtype=float)
         peak = [result["peak_force_n"] for _, result in labelled]
-        low_passed = [result.get("peak_low_passed_force_n") or 0.0 for _, result in labelled]
+        # Evaluations stored before the low-passed peak existed draw no bar, not 0 N.
+        low_passed = [
+            np.nan if (f := result.get("peak_low_passed_force_n")) is None else f
+            for _, result in labelled
+        ]
         ax.barh(y - 0.2, peak, height=0.4, label="peak (2 ms)")
         ax.barh(y + 0.2, low_passed, height=0.4, label="peak, 20 ms low-passed")
         ax.set_xlabel("mean peak contact force (N)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -95,6 +96,18 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
 
     with Image.open(paths["png"]) as plot:  # a palette image: results/ stays small
         assert plot.mode == "P" and plot.size == (500, 340)
+
+
+def test_force_figure_draws_old_evaluations_and_refuses_empty_panels(dmp_result, tmp_path):
+    """An evaluation stored before the low-passed peak existed draws its one-step bar
+    only; a panel without evaluations is refused with the panel named."""
+    from rlfd_drake.evaluate import plot_peak_forces
+
+    old = {k: v for k, v in dmp_result.items() if k != "peak_low_passed_force_n"}
+    path = plot_peak_forces({"easy": [("new", dmp_result), ("old", old)]}, tmp_path / "f.png")
+    assert path.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(ValueError, match=re.escape("got {'easy': 1, 'hard': 0}")):
+        plot_peak_forces({"easy": [("new", dmp_result)], "hard": []}, tmp_path / "g.png")
 
 
 def test_success_curve_of_binned_results():
