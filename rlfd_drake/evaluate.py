@@ -631,7 +631,12 @@ def _figure(n_panels: int, height: float, n_labels: int):
 
 def _save(plt, fig, axes, path: Path, legend_in: float) -> Path:
     if legend_in:
-        handles, labels = axes[0].get_legend_handles_labels()
+        # One entry per label over every panel (a row may be measured in one only).
+        entries = {}
+        for ax in axes:
+            for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+                entries.setdefault(label, handle)
+        handles, labels = list(entries.values()), list(entries)
         fig.tight_layout(rect=(0, legend_in / fig.get_figheight(), 1, 1))
         fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=7, frameon=False)
     else:
@@ -677,8 +682,6 @@ def plot_success_panels(panels: dict[str, list[tuple[str, dict]]], path: Path) -
         ax.set_ylim(-5, 105)
         ax.set_title(title)
         ax.grid(alpha=0.3)
-    if legend_in:  # one entry per label, taken from the panel that has them all
-        axes.sort(key=lambda ax: -len(ax.get_legend_handles_labels()[1]))
     return _save(plt, fig, axes, path, legend_in)
 
 
