@@ -334,6 +334,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         action_cost=args.action_cost,
         distance_shaping=args.distance_shaping,
         distance_shaping_axes=args.distance_shaping_axes,
+        base_correction=args.base_correction,
+        timeout_terminal=args.timeout_terminal,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
@@ -712,6 +714,18 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="with --residual-mode translation or orientation: the policy outputs only "
         "that 3-D part of the residual",
+    )
+    train.add_argument(
+        "--base-correction",
+        choices=["force_search"],
+        help="learn the residual on top of this hand-written rule (added to the "
+        "learned action in training and in evaluations); default: none, the paper's rLfD",
+    )
+    train.add_argument(
+        "--timeout-terminal",
+        action="store_true",
+        help="the learner treats the end of the episode's time as terminal (the "
+        "observation carries the time) instead of bootstrapping it as a truncation",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

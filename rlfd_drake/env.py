@@ -559,6 +559,23 @@ class AppliedResidualAction(gym.ActionWrapper):
         return pad_residual_part(action, self.residual_mode).astype(np.float32)
 
 
+class TimeLimitAsTerminal(gym.Wrapper):
+    """Reports the end of an episode's time as a terminal state, for learners.
+
+    The observation carries the DMP phase and the time, so the task is a finite-horizon
+    one whose end is part of it (Pardo et al., "Time Limits in Reinforcement Learning",
+    ICML 2018). Left as a truncation, Stable-Baselines3 bootstraps the last step from
+    the critic's value of the next state, as if the episode went on: a residual that
+    holds the part just short of the goal (or lifts it off the fixture) until the time
+    runs out then scores what the critic guesses for states near the goal, without the
+    force-limit penalty that pushing on risks. As terminal, waiting scores 0. A success
+    or a break is terminal either way; the env's own semantics are unchanged."""
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        return observation, reward, terminated or truncated, False, info
+
+
 def register_envs() -> None:
     """Registers every id of ``ENV_IDS`` with Gymnasium (idempotent)."""
     for env_id, task_name in ENV_IDS.items():

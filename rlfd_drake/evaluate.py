@@ -46,6 +46,7 @@ from rlfd_drake.policies import (
     check_residual_mode,
     load_sb3_model,
     policy_file,
+    trained_base_correction,
     trained_residual_mode,
 )
 from rlfd_drake.results import compact_png, results_dir, write_result
@@ -158,13 +159,20 @@ def make_policy(
             pass
         _MODEL_CACHE[policy_spec] = load_sb3_model(policy_spec)
     model, kind = _MODEL_CACHE[policy_spec]
-    return DeployedPolicy(
+    policy = DeployedPolicy(
         model,
         residual_mode,
         deterministic=deterministic,
         seed=episode_seed,
         noise_scale=noise_scale,
     )
+    base_correction = trained_base_correction(policy_file(policy_spec))
+    if base_correction is None:
+        return policy
+    from rlfd_drake.base_correction import BaseCorrectedPolicy, make_base_correction
+
+    # Trained on top of a rule: it acts on top of the same rule.
+    return BaseCorrectedPolicy(make_base_correction(base_correction), policy)
 
 
 # --------------------------------------------------------------------------------------

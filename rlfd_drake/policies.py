@@ -25,6 +25,10 @@ SB3_CLASSES = {
 }
 
 
+#: The folders of a run where ``rlfd train`` saves policies besides ``policy.zip``.
+RUN_SUBFOLDERS = ("checkpoints", "eval")
+
+
 def _sb3_kind_from_zip(path: Path) -> str | None:
     """The algorithm of an SB3 zip from its policy class module, or None if unclear."""
     try:
@@ -103,26 +107,43 @@ _MODE_PARTS = {
 
 def training_config_file(policy_path: str | Path) -> Path | None:
     """The training configuration saved with a policy: ``<name>.json`` beside it (what
-    ``rlfd export`` writes), or the run folder's ``config.json`` beside a
-    ``policy.zip``; None if there is neither."""
+    ``rlfd export`` writes), the run folder's ``config.json`` beside a ``policy.zip``,
+    or above a checkpoint or best model in the run's ``checkpoints/`` or ``eval/``
+    folder; None if there is none."""
     path = Path(policy_path)
-    for candidate in (path.with_suffix(".json"), path.with_name("config.json")):
-        if candidate.exists() and (candidate.name != "config.json" or path.name == "policy.zip"):
-            return candidate
+    if path.with_suffix(".json").exists():
+        return path.with_suffix(".json")
+    if path.name == "policy.zip" and path.with_name("config.json").exists():
+        return path.with_name("config.json")
+    if path.parent.name in RUN_SUBFOLDERS and (path.parent.parent / "config.json").exists():
+        return path.parent.parent / "config.json"
     return None
+
+
+def trained_config_value(policy_path: str | Path, key: str):
+    """A field of the training configuration saved with a policy (see
+    :func:`training_config_file`), or None if there is none or it lacks the field."""
+    config_file = training_config_file(policy_path)
+    if config_file is None:
+        return None
+    try:
+        return json.loads(config_file.read_text())["config"][key]
+    except (KeyError, TypeError, ValueError):
+        return None  # not a training configuration
 
 
 def trained_residual_mode(policy_path: str | Path) -> str | None:
     """The ``residual_mode`` a policy was trained with, from its training configuration
     (see :func:`training_config_file`), or None if unknown."""
-    config_file = training_config_file(policy_path)
-    if config_file is None:
-        return None
-    try:
-        mode = json.loads(config_file.read_text())["config"]["residual_mode"]
-    except (KeyError, TypeError, ValueError):
-        return None  # not a training configuration
+    mode = trained_config_value(policy_path, "residual_mode")
     return mode if mode in _MODE_PARTS else None
+
+
+def trained_base_correction(policy_path: str | Path) -> str | None:
+    """The hand-written rule a policy was trained on top of (``rlfd train
+    --base-correction``), or None (the DMP alone, or unknown)."""
+    name = trained_config_value(policy_path, "base_correction")
+    return name if isinstance(name, str) else None
 
 
 def check_residual_mode(policy_path: str | Path, residual_mode: str) -> None:

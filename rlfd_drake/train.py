@@ -38,12 +38,14 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
+from rlfd_drake.base_correction import BASE_CORRECTIONS, BaseCorrectedAction
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import (
     ENV_IDS,
     AppliedResidualAction,
     RlfdEnv,
+    TimeLimitAsTerminal,
     check_reward_terms,
 )
 from rlfd_drake.observation_scaling import (
@@ -147,6 +149,14 @@ class TrainConfig:
         distance_shaping_axes: "all" position errors, the "lateral" two across
             the insertion axis (lifting to slide sideways then costs nothing), or
             "lateral_depth": those and the depth still to go inside the fixture.
+        base_correction: a hand-written rule (``base_correction.BASE_CORRECTIONS``,
+            e.g. "force_search") whose action the learned residual is added to, in
+            training and in evaluations (residual RL on the DMP plus that rule); None =
+            the paper's rLfD, the residual on the DMP alone.
+        timeout_terminal: the learner treats the end of an episode's time as terminal
+            (``env.TimeLimitAsTerminal``: the observation carries the time, so waiting
+            until it runs out scores 0) instead of bootstrapping it as a truncation
+            (SB3's default, and these runs' before 2026-12-01).
     """
 
     task: str = "peg_easy"
@@ -184,6 +194,8 @@ class TrainConfig:
     sac_correlated_noise_time_s: float = 2.0
     distance_shaping: float = 0.0
     distance_shaping_axes: str = "all"
+    base_correction: str | None = None
+    timeout_terminal: bool = False
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -261,6 +273,16 @@ class TrainConfig:
                 "sac_correlated_noise_time_s must be a positive number, got "
                 f"{self.sac_correlated_noise_time_s}"
             )
+        if self.base_correction is not None and self.base_correction not in BASE_CORRECTIONS:
+            raise ValueError(
+                f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got "
+                f"{self.base_correction!r}"
+            )
+        if self.base_correction is not None and self.composition != "residual":
+            raise ValueError(
+                f"base_correction={self.base_correction!r} needs composition 'residual', got "
+                f"{self.composition!r}"
+            )
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -293,16 +315,42 @@ def _env_kwargs(config: TrainConfig) -> dict:
     }
 
 
+def wrap_training_env(
+    env,
+    residual_mode: str,
+    applied_action_only: bool,
+    base_correction: str | None,
+    timeout_terminal: bool = False,
+):
+    """An RlfdEnv as the learner sees it: its time limit terminal if asked, its action
+    added to the base correction's (on the 6-D residual), then only the applied 3-D
+    part if asked."""
+    if timeout_terminal:
+        env = TimeLimitAsTerminal(env)
+    if base_correction is not None:
+        env = BaseCorrectedAction(env, base_correction)
+    if applied_action_only:
+        env = AppliedResidualAction(env, residual_mode)
+    return env
+
+
 def make_envs(config: TrainConfig, n_envs: int, seed: int):
     """The (vectorised, history-stacked for SAC) training or evaluation envs."""
     vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
     vec_kwargs = {"start_method": "spawn"} if n_envs > 1 else None
     wrapper = (
         dict(
-            wrapper_class=AppliedResidualAction,
-            wrapper_kwargs={"residual_mode": config.residual_mode},
+            wrapper_class=wrap_training_env,
+            wrapper_kwargs={
+                "residual_mode": config.residual_mode,
+                "applied_action_only": config.applied_action_only,
+                "base_correction": config.base_correction,
+                "timeout_terminal": config.timeout_terminal,
+            },
         )
         if config.applied_action_only
+        or config.base_correction is not None
+        or config.timeout_terminal
         else {}
     )
     venv = make_vec_env(

@@ -561,3 +561,34 @@ def test_sac_explores_with_the_correlated_noise_from_its_warm_up():
 def test_correlated_noise_is_validated(fields, message):
     with pytest.raises(ValueError, match=message):
         TrainConfig(**fields)
+
+
+@pytest.mark.parametrize("timeout_terminal", [False, True])
+def test_timeout_terminal_makes_the_learner_treat_the_time_limit_as_terminal(timeout_terminal):
+    from stable_baselines3 import SAC
+
+    from rlfd_drake.env import TimeLimitAsTerminal
+    from rlfd_drake.tasks import load_task
+    from rlfd_drake.train import wrap_training_env
+
+    # The residual acts from 0.3 s (FAST): 4 residual steps of 0.1 s.
+    short = replace(load_task("peg_easy"), episode_time_s=0.7)
+
+    def make():
+        env = RlfdEnv(short, diagram_config=FAST)
+        return wrap_training_env(env, "full", False, None, timeout_terminal)
+
+    env = make()
+    assert isinstance(env, TimeLimitAsTerminal) == timeout_terminal
+    env.reset(seed=0)
+    ends = [env.step(np.zeros(6, dtype=np.float32))[2:4] for _ in range(4)]
+    assert ends[:3] == [(False, False)] * 3
+    assert ends[3] == ((True, False) if timeout_terminal else (False, True))
+    model = SAC("MlpPolicy", DummyVecEnv([make]), learning_starts=100, seed=0)
+    model.learn(total_timesteps=4)
+    buffer = model.replay_buffer
+    # SB3 bootstraps a step whose timeout flag is set; a terminal one scores 0 after.
+    assert buffer.dones[3, 0] == 1.0
+    assert buffer.timeouts[3, 0] == (0.0 if timeout_terminal else 1.0)
+    assert not buffer.dones[:3].any()
+    assert TrainConfig(timeout_terminal=True).timeout_terminal

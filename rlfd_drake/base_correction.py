@@ -1,0 +1,95 @@
+"""A hand-written correction under the learned residual (residual RL on a base rule).
+
+rLfD learns its residual on top of the DMP alone. Residual RL in general (Johannink et
+al., ICRA 2019; Silver et al., 2018) learns on top of any base controller: here the DMP
+plus a stateless correction rule, obs (26,) -> residual (6,), whose action the learned
+residual's is added to (the sum clipped to the residual's range). The learner then
+starts from what the rule achieves and only has to learn what to change, not the whole
+search; the replay buffer and the policy keep the learner's own action.
+
+:data:`BASE_CORRECTIONS` names the rules; a run trained with one (``rlfd train
+--base-correction NAME``) stores the name in its configuration, and ``rlfd evaluate``
+adds the same rule under the policy (``evaluate.make_policy``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+
+from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+
+__all__ = [
+    "BASE_CORRECTIONS",
+    "BaseCorrectedAction",
+    "BaseCorrectedPolicy",
+    "add_base_correction",
+    "make_base_correction",
+]
+
+#: Name -> factory of a stateless correction rule (obs -> 6-D residual in [-1, 1]).
+BASE_CORRECTIONS: dict[str, Callable[[], Callable[[np.ndarray], np.ndarray]]] = {
+    "force_search": ForceGuidedSearch,
+}
+
+
+def make_base_correction(name: str):
+    """A new instance of the rule ``name``; ValueError naming an unknown one."""
+    if name not in BASE_CORRECTIONS:
+        raise ValueError(f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got {name!r}")
+    return BASE_CORRECTIONS[name]()
+
+
+def add_base_correction(base: np.ndarray, learned: np.ndarray) -> np.ndarray:
+    """The applied residual: the rule's plus the learner's, clipped to [-1, 1]."""
+    base = np.asarray(base, dtype=float).reshape(-1)
+    learned = np.asarray(learned, dtype=float).reshape(-1)
+    if base.shape != learned.shape:
+        raise ValueError(
+            f"the base correction has {base.size} components and the learned residual "
+            f"{learned.size}"
+        )
+    return np.clip(base + learned, -1.0, 1.0)
+
+
+class BaseCorrectedPolicy:
+    """A residual policy (obs -> 6-D action, with ``reset()``) run on top of a rule, as
+    the diagram's ``ResidualPolicy`` calls it in evaluations."""
+
+    def __init__(self, base, learned):
+        self.base = base
+        self.learned = learned
+
+    def reset(self) -> None:
+        for part in (self.base, self.learned):
+            if hasattr(part, "reset"):
+                part.reset()
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return add_base_correction(self.base(observation), self.learned(observation))
+
+
+class BaseCorrectedAction(gym.Wrapper):
+    """An RlfdEnv whose (6-D) action is added to the rule's action on the observation the
+    agent acted on, for training: the env applies the sum, the agent keeps its own."""
+
+    def __init__(self, env: gym.Env, base_correction: str):
+        super().__init__(env)
+        self.base = make_base_correction(base_correction)
+        self._observation: np.ndarray | None = None
+
+    def reset(self, **kwargs):
+        observation, info = self.env.reset(**kwargs)
+        self.base.reset()
+        self._observation = np.asarray(observation)
+        return observation, info
+
+    def step(self, action):
+        if self._observation is None:
+            raise RuntimeError("BaseCorrectedAction.step before reset")
+        applied = add_base_correction(self.base(self._observation), action).astype(np.float32)
+        observation, reward, terminated, truncated, info = self.env.step(applied)
+        self._observation = np.asarray(observation)
+        return observation, reward, terminated, truncated, info

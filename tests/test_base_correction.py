@@ -1,0 +1,135 @@
+"""A learned residual on top of a hand-written rule (``rlfd train --base-correction``)."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rlfd_drake.base_correction import (
+    BaseCorrectedAction,
+    BaseCorrectedPolicy,
+    add_base_correction,
+    make_base_correction,
+)
+from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+from rlfd_drake.systems.observer import (
+    OBSERVATION_SIZE,
+    OBSERVATION_WRIST_FORCE,
+    OBSERVATION_WRIST_TORQUE,
+    ObserverConfig,
+)
+from rlfd_drake.train import TrainConfig
+
+RANGE = ObserverConfig()
+
+
+def _pressed_observation() -> np.ndarray:
+    """The wrist pressed with 25 N, its centre of pressure 2 mm toward -x: the force
+    search lifts fully and pushes +x."""
+    obs = np.zeros(OBSERVATION_SIZE)
+    force = np.array([0.0, 0.0, -25.0])
+    obs[OBSERVATION_WRIST_FORCE] = force / RANGE.force_scale_N
+    obs[OBSERVATION_WRIST_TORQUE] = np.cross([-0.002, 0.0, -0.05], force) / RANGE.torque_scale_Nm
+    return obs
+
+
+class _RecordingEnv(gym.Env):
+    """Returns the pressed observation and records the actions it is given."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (OBSERVATION_SIZE,), np.float64)
+    action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
+
+    def __init__(self):
+        self.actions = []
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(OBSERVATION_SIZE), {}
+
+    def step(self, action):
+        self.actions.append(np.asarray(action, dtype=float))
+        return _pressed_observation(), 0.0, False, False, {}
+
+
+def test_the_applied_residual_is_the_sum_clipped_to_the_range():
+    np.testing.assert_allclose(
+        add_base_correction([1.0, 0.5, -0.2, 0, 0, 0], [0.5, -0.25, -0.9, 0, 0, 0.3]),
+        [1.0, 0.25, -1.0, 0.0, 0.0, 0.3],
+    )
+    with pytest.raises(ValueError, match="base correction has 6 components and the learned"):
+        add_base_correction(np.zeros(6), np.zeros(3))
+
+
+def test_an_unknown_rule_is_refused_by_name():
+    with pytest.raises(ValueError, match="base_correction must be one of .*'wiggle'"):
+        make_base_correction("wiggle")
+    with pytest.raises(ValueError, match="base_correction must be one of .*'wiggle'"):
+        TrainConfig(base_correction="wiggle")
+    with pytest.raises(ValueError, match="needs composition 'residual', got 'hybrid'"):
+        TrainConfig(base_correction="force_search", composition="hybrid")
+
+
+def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():
+    env = _RecordingEnv()
+    wrapped = BaseCorrectedAction(env, "force_search")
+    wrapped.reset(seed=0)
+    learned = np.array([0.25, 0.5, -0.5, 0.0, 0.0, 0.0], dtype=np.float32)
+    wrapped.step(learned)  # free space at reset: the rule adds nothing
+    np.testing.assert_allclose(env.actions[-1], learned)
+    wrapped.step(learned)  # pressed: the rule lifts 1 and pushes +x by 1
+    rule = ForceGuidedSearch()(_pressed_observation())
+    np.testing.assert_allclose(rule, [1.0, 0.0, 1.0, 0.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(env.actions[-1], [1.0, 0.5, 0.5, 0.0, 0.0, 0.0], atol=1e-7)
+    with pytest.raises(RuntimeError, match="before reset"):
+        BaseCorrectedAction(_RecordingEnv(), "force_search").step(learned)
+
+
+def test_a_run_trained_on_the_rule_is_evaluated_on_it(tmp_path):
+    from rlfd_drake.evaluate import make_policy
+    from rlfd_drake.train import make_envs, make_model
+
+    config = TrainConfig(
+        algo="sac",
+        envs=1,
+        history=1,
+        residual_mode="translation",
+        base_correction="force_search",
+        sac_learning_starts=4,
+    )
+    venv = make_envs(config, 1, seed=0)
+    model = make_model(config, venv, None)
+    model.learn(total_timesteps=6)
+    venv.close()
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    model.save(run / "policy.zip")
+    model.save(run / "checkpoints" / "policy_6_steps.zip")
+    (run / "config.json").write_text(json.dumps({"config": {"base_correction": "force_search"}}))
+    observation = _pressed_observation()
+    for path in (run / "policy.zip", run / "checkpoints" / "policy_6_steps.zip"):
+        policy = make_policy(str(path), "translation")
+        assert isinstance(policy, BaseCorrectedPolicy)
+        policy.reset()
+        learned = policy.learned(observation)
+        policy.reset()
+        np.testing.assert_allclose(
+            policy(observation),
+            np.clip(ForceGuidedSearch()(observation) + learned, -1.0, 1.0),
+            atol=1e-7,
+        )
+    # Without the configuration the policy alone is run, as before.
+    (run / "config.json").unlink()
+    assert not isinstance(make_policy(str(run / "policy.zip"), "translation"), BaseCorrectedPolicy)
+
+
+def test_the_cli_offers_exactly_the_known_rules():
+    from rlfd_drake.base_correction import BASE_CORRECTIONS
+    from rlfd_drake.cli import build_parser
+
+    train_parser = build_parser()._subparsers._group_actions[0].choices["train"]
+    option = next(a for a in train_parser._actions if a.dest == "base_correction")
+    assert sorted(option.choices) == sorted(BASE_CORRECTIONS)
+    assert option.default is None
