@@ -6,7 +6,8 @@ and with sampled actions; ``results/seeds_<name>.{json,md}`` get each seed's suc
 the mean +- sample standard deviation (ddof 1) over the seeds, each run's training
 episodes and wall-clock time, and, given targets, on how many seeds they are met.
 
-Evaluations are stored under the names ``rlfd evaluate`` gives them and reused when one
+Evaluations are stored under the names ``rlfd evaluate --episodes N`` gives them (or
+found under the names without ``_n<N>`` that earlier studies stored) and reused when one
 of the same size and seed exists, so re-running a study after adding a seed evaluates
 only the new seed. Run folders are local (``runs/`` is not committed): a folder that
 is missing here is read from its copied log ``results/train_<folder name>/`` and its
@@ -99,6 +100,28 @@ def study_name(folders: list[str | Path]) -> str:
     return stems.pop()
 
 
+def _evaluation_name(
+    task: str, policy: str, mode: str, stochastic: bool, seed: int, episodes: int
+) -> str:
+    """The name ``rlfd evaluate --episodes N`` gives the evaluation (``..._n<N>_s<seed>``),
+    or the name without the count that studies before it used, where only that one is
+    stored."""
+    name = evaluation_name(task, policy, mode, stochastic, seed, episodes=episodes)
+    legacy = evaluation_name(task, policy, mode, stochastic, seed)
+    if (
+        not (results_dir() / f"{name}.json").exists()
+        and (results_dir() / f"{legacy}.json").exists()
+    ):
+        return legacy
+    return name
+
+
+def _column_label(column: str) -> str:
+    """ "<task>/<actions>" as "<task name>, <actions>" (a variant's YAML by its stem)."""
+    task, _, label = column.rpartition("/")
+    return f"{Path(task).stem}, {label}"
+
+
 def _spread(values: list[float]) -> dict:
     return {
         "mean": float(np.mean(values)),
@@ -146,6 +169,11 @@ def seed_study(
     targets = dict(targets or {})
     if targets and "mean" not in actions:
         raise ValueError("targets are checked on the mean action: actions must include 'mean'")
+    # A task given as a YAML path may be targeted by its name (its file stem).
+    targets = {
+        next((t for t in tasks if t != task and Path(t).stem == task), task): target
+        for task, target in targets.items()
+    }
     for task, target in targets.items():
         if task not in tasks:
             raise ValueError(f"targets: task {task!r} is not evaluated (tasks: {tasks})")
@@ -170,7 +198,9 @@ def seed_study(
         for task in tasks:
             for label in actions:
                 stochastic = ACTIONS[label]
-                evaluation = evaluation_name(task, str(run.policy), mode, stochastic, seed)
+                evaluation = _evaluation_name(
+                    task, str(run.policy), mode, stochastic, seed, episodes
+                )
                 result = stored_or_new_evaluation(
                     task,
                     str(run.policy),
@@ -232,7 +262,7 @@ def seed_study_markdown(data: dict) -> str:
         *[f"    {command}" for command in data["commands"] if command],
         "",
         "| training seed | episodes | wall-clock (s) | "
-        + " | ".join(f"{column.replace('/', ', ')}" for column in columns)
+        + " | ".join(_column_label(column) for column in columns)
         + (" | meets targets |" if targets else " |"),
         "|---" * (3 + len(columns) + bool(targets)) + "|",
     ]
@@ -260,7 +290,7 @@ def seed_study_markdown(data: dict) -> str:
     lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
     if targets:
-        wanted = ", ".join(f"{task} >= {target:g} %" for task, target in targets.items())
+        wanted = ", ".join(f"{Path(task).stem} >= {target:g} %" for task, target in targets.items())
         lines.append(f"Targets (mean action): {wanted}.")
     lines.append("The std is the sample standard deviation over training seeds (ddof 1).")
     return "\n".join(lines) + "\n"

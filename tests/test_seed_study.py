@@ -32,8 +32,11 @@ def _run_folder(tmp_path, seed, **changes):
     return folder
 
 
-def _store_evaluation(folder, task, stochastic, success_rate, episodes=200):
-    name = evaluation_name(task, str(folder / "policy.zip"), "translation", stochastic, 0)
+def _store_evaluation(folder, task, stochastic, success_rate, episodes=200, counted=False):
+    """Stores an evaluation under the name studies used first, or (``counted``) under
+    ``rlfd evaluate --episodes N``'s, which carries the count."""
+    count = {"episodes": episodes} if counted else {}
+    name = evaluation_name(task, str(folder / "policy.zip"), "translation", stochastic, 0, **count)
     bounds = list(RlfdDiagramConfig().residual_bounds(load_task(task)))
     data = {
         "task": task,
@@ -145,3 +148,23 @@ def test_study_evaluates_a_run_that_has_no_stored_evaluation(tmp_path, monkeypat
         assert row["success"][column] in (0.0, 100.0)  # one episode
         assert (tmp_path / "results" / f"{row['evaluations'][column]}.json").is_file()
     assert data["over_seeds"]["peg_easy/mean"]["std"] is None  # one seed has no spread
+
+
+def test_study_reuses_what_rlfd_evaluate_stored_and_targets_a_variant_by_name(
+    tmp_path, monkeypatch
+):
+    variant = str(model_path("tasks/variants/rj45_slow_insert.yaml"))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    folders = []
+    for seed, rate in ((0, 0.519), (1, 0.506)):
+        folder = _run_folder(tmp_path, seed, task=variant)
+        folders.append(folder)
+        _store_evaluation(folder, variant, False, rate, episodes=160, counted=True)
+    data = seed_study(
+        folders, [variant], episodes=160, targets={"rj45_slow_insert": 51.0}, actions=("mean",)
+    )
+    assert [row["meets_targets"] for row in data["per_seed"]] == [True, False]
+    assert data["per_seed"][0]["evaluations"][f"{variant}/mean"].endswith("_n160_s0")
+    markdown = (tmp_path / "results" / f"seeds_{data['name']}.md").read_text()
+    assert "| rj45_slow_insert, mean |" in markdown and "rj45_slow_insert >= 51 %" in markdown
