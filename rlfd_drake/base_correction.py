@@ -26,6 +26,7 @@ __all__ = [
     "BaseCorrectedAction",
     "BaseCorrectedPolicy",
     "add_base_correction",
+    "check_base_correction",
     "make_base_correction",
 ]
 
@@ -35,10 +36,15 @@ BASE_CORRECTIONS: dict[str, Callable[[], Callable[[np.ndarray], np.ndarray]]] = 
 }
 
 
-def make_base_correction(name: str):
-    """A new instance of the rule ``name``; ValueError naming an unknown one."""
+def check_base_correction(name: str) -> None:
+    """ValueError naming ``name`` unless it is one of :data:`BASE_CORRECTIONS`."""
     if name not in BASE_CORRECTIONS:
         raise ValueError(f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got {name!r}")
+
+
+def make_base_correction(name: str):
+    """A new instance of the rule ``name``; ValueError naming an unknown one."""
+    check_base_correction(name)
     return BASE_CORRECTIONS[name]()
 
 

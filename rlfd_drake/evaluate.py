@@ -88,7 +88,9 @@ RESULT_KEYS = (
     "episode_table",
 )
 
-_MODEL_CACHE: dict[str, tuple[object, str]] = {}
+#: policy spec -> (loaded SB3 model, the rule it was trained on top of or None), read once
+#: per process: ``make_policy`` runs for every episode.
+_MODEL_CACHE: dict[str, tuple[object, str | None]] = {}
 #: Policies named by a word rather than a file.
 NAMED_POLICIES = ("dmp", "random", "force_search")
 
@@ -157,8 +159,11 @@ def make_policy(
             torch.set_num_threads(1)
         except ImportError:  # pragma: no cover - torch is a dependency
             pass
-        _MODEL_CACHE[policy_spec] = load_sb3_model(policy_spec)
-    model, kind = _MODEL_CACHE[policy_spec]
+        _MODEL_CACHE[policy_spec] = (
+            load_sb3_model(policy_spec)[0],
+            trained_base_correction(policy_file(policy_spec)),
+        )
+    model, base_correction = _MODEL_CACHE[policy_spec]
     policy = DeployedPolicy(
         model,
         residual_mode,
@@ -166,7 +171,6 @@ def make_policy(
         seed=episode_seed,
         noise_scale=noise_scale,
     )
-    base_correction = trained_base_correction(policy_file(policy_spec))
     if base_correction is None:
         return policy
     from rlfd_drake.base_correction import BaseCorrectedPolicy, make_base_correction

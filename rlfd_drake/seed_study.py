@@ -108,16 +108,14 @@ def _evaluation_name(
     stored."""
     name = evaluation_name(task, policy, mode, stochastic, seed, episodes=episodes)
     legacy = evaluation_name(task, policy, mode, stochastic, seed)
-    if (
-        not (results_dir() / f"{name}.json").exists()
-        and (results_dir() / f"{legacy}.json").exists()
-    ):
+    stored = results_dir()
+    if not (stored / f"{name}.json").exists() and (stored / f"{legacy}.json").exists():
         return legacy
     return name
 
 
 def _column_label(column: str) -> str:
-    """ "<task>/<actions>" as "<task name>, <actions>" (a variant's YAML by its stem)."""
+    """A column "<task>/<actions>" as "<task name>, <actions>" (a YAML by its stem)."""
     task, _, label = column.rpartition("/")
     return f"{Path(task).stem}, {label}"
 

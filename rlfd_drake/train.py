@@ -38,7 +38,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
-from rlfd_drake.base_correction import BASE_CORRECTIONS, BaseCorrectedAction
+from rlfd_drake.base_correction import BaseCorrectedAction, check_base_correction
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import (
@@ -273,11 +273,8 @@ class TrainConfig:
                 "sac_correlated_noise_time_s must be a positive number, got "
                 f"{self.sac_correlated_noise_time_s}"
             )
-        if self.base_correction is not None and self.base_correction not in BASE_CORRECTIONS:
-            raise ValueError(
-                f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got "
-                f"{self.base_correction!r}"
-            )
+        if self.base_correction is not None:
+            check_base_correction(self.base_correction)
         if self.base_correction is not None and self.composition != "residual":
             raise ValueError(
                 f"base_correction={self.base_correction!r} needs composition 'residual', got "
@@ -338,20 +335,14 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
     """The (vectorised, history-stacked for SAC) training or evaluation envs."""
     vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
     vec_kwargs = {"start_method": "spawn"} if n_envs > 1 else None
-    wrapper = (
-        dict(
-            wrapper_class=wrap_training_env,
-            wrapper_kwargs={
-                "residual_mode": config.residual_mode,
-                "applied_action_only": config.applied_action_only,
-                "base_correction": config.base_correction,
-                "timeout_terminal": config.timeout_terminal,
-            },
-        )
-        if config.applied_action_only
-        or config.base_correction is not None
-        or config.timeout_terminal
-        else {}
+    wrapper = dict(  # returns the env itself when the config asks for none
+        wrapper_class=wrap_training_env,
+        wrapper_kwargs={
+            "residual_mode": config.residual_mode,
+            "applied_action_only": config.applied_action_only,
+            "base_correction": config.base_correction,
+            "timeout_terminal": config.timeout_terminal,
+        },
     )
     venv = make_vec_env(
         RlfdEnv,

@@ -88,6 +88,7 @@ def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():
 
 
 def test_a_run_trained_on_the_rule_is_evaluated_on_it(tmp_path):
+    import rlfd_drake.evaluate as evaluate_module
     from rlfd_drake.evaluate import make_policy
     from rlfd_drake.train import make_envs, make_model
 
@@ -120,8 +121,10 @@ def test_a_run_trained_on_the_rule_is_evaluated_on_it(tmp_path):
             np.clip(ForceGuidedSearch()(observation) + learned, -1.0, 1.0),
             atol=1e-7,
         )
-    # Without the configuration the policy alone is run, as before.
+    # Without the configuration the policy alone is run, as before (in a new process:
+    # a process reads a policy's file and configuration once).
     (run / "config.json").unlink()
+    evaluate_module._MODEL_CACHE.clear()
     assert not isinstance(make_policy(str(run / "policy.zip"), "translation"), BaseCorrectedPolicy)
 
 
