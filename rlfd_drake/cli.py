@@ -498,6 +498,22 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_breakdown(args: argparse.Namespace) -> int:
+    from rlfd_drake.breakdown import breakdown
+
+    data = breakdown(
+        args.evaluations,
+        by=args.by,
+        edges=tuple(args.edges) if args.edges else None,
+        labels=args.labels,
+        name=args.name,
+        overwrite=args.overwrite,
+    )
+    print(f"{data['task']}: {len(data['columns'])} evaluations grouped by {data['by']}")
+    print(f"wrote results/breakdown_{args.name}.json and .md")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rlfd", description="Residual Learning from Demonstration on Drake."
@@ -870,6 +886,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     plot.add_argument("--overwrite", action="store_true", help="replace an existing PNG")
     plot.set_defaults(func=_cmd_plot)
+
+    regroup = sub.add_parser(
+        "breakdown",
+        help="stored evaluations side by side, grouped by the unseen fixture error",
+    )
+    regroup.add_argument("evaluations", nargs="+", help="evaluation JSON files of one task")
+    regroup.add_argument(
+        "--by",
+        choices=["fixture_rotation", "fixture_position"],
+        default="fixture_rotation",
+        help="group by the fixture's rotation error (deg, table slope included) or "
+        "position error (mm)",
+    )
+    regroup.add_argument(
+        "--edges",
+        nargs="+",
+        type=float,
+        help="group edges (default: 0 1 1.5 2 2.5 inf deg or 0 1 2 3 inf mm)",
+    )
+    regroup.add_argument("--labels", nargs="+", help="one column label per file")
+    regroup.add_argument("--name", required=True, help="writes results/breakdown_<name>.{json,md}")
+    regroup.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    regroup.set_defaults(func=_cmd_breakdown)
 
     view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
     view.add_argument("--task", default="peg_easy")

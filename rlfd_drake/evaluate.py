@@ -53,6 +53,7 @@ from rlfd_drake.results import compact_png, results_dir, write_result
 from rlfd_drake.tasks import TaskSpec, load_task
 
 __all__ = [
+    "EPISODE_GROUPINGS",
     "RESULT_KEYS",
     "evaluate",
     "evaluation_name",
@@ -62,6 +63,7 @@ __all__ = [
     "write_evaluation",
     "plot_success_panels",
     "plot_peak_forces",
+    "success_by_group",
 ]
 
 #: Keys of the dict returned by :func:`evaluate`.
@@ -259,36 +261,77 @@ def _binomial_std(p: float, n: int) -> float:
     return math.sqrt(p * (1.0 - p) / n) if n > 0 else float("nan")
 
 
+#: Ways to group an evaluation's episodes by what the robot could not see: name ->
+#: (episode_table column, unit, default group edges). The rotation groups are finer
+#: because a plug with 0.25 mm of clearance jams within a degree or two.
+EPISODE_GROUPINGS = {
+    "fixture_position": ("fixture_error_mm", "mm", (0.0, 1.0, 2.0, 3.0, math.inf)),
+    "fixture_rotation": ("fixture_error_deg", "deg", (0.0, 1.0, 1.5, 2.0, 2.5, math.inf)),
+}
 #: Edges (mm) of the fixture position error groups of :func:`success_by_fixture_error`.
-FIXTURE_ERROR_EDGES_MM = (0.0, 1.0, 2.0, 3.0, math.inf)
+FIXTURE_ERROR_EDGES_MM = EPISODE_GROUPINGS["fixture_position"][2]
+
+
+def success_by_group(
+    result: dict, by: str = "fixture_position", edges: tuple[float, ...] | None = None
+) -> list[dict]:
+    """Success and failure kinds in groups of one of :data:`EPISODE_GROUPINGS`, from an
+    evaluation's episode table (so stored evaluations can be regrouped): a list of
+    ``{"from", "to", "n", "success_rate", "failures": {kind: count}}``, empty groups
+    left out, ``from <= value < to``.
+
+    Raises:
+        ValueError: ``by`` is not a grouping, ``edges`` do not increase, or the
+            evaluation was stored before its table had the grouping's column.
+    """
+    if by not in EPISODE_GROUPINGS:
+        raise ValueError(f"by must be one of {sorted(EPISODE_GROUPINGS)}, got {by!r}")
+    column, _, default_edges = EPISODE_GROUPINGS[by]
+    edges = default_edges if edges is None else tuple(float(e) for e in edges)
+    if len(edges) < 2 or any(b <= a for a, b in itertools.pairwise(edges)):
+        raise ValueError(f"edges must increase, got {edges}")
+    table = result["episode_table"]
+    if column not in table:
+        raise ValueError(f"the evaluation's episode table has no {column!r} column")
+    value = np.asarray(table[column], dtype=float)
+    success = np.asarray(table["success"], dtype=bool)
+    failure = table.get("failure", [None] * len(success))
+    groups = []
+    for low, high in itertools.pairwise(edges):
+        mask = (value >= low) & (value < high)
+        if np.any(mask):
+            kinds = Counter(
+                str(reason).split(":")[0]
+                for reason, inside in zip(failure, mask, strict=True)
+                if inside and reason is not None
+            )
+            groups.append(
+                {
+                    "from": low,
+                    "to": high,
+                    "n": int(mask.sum()),
+                    "success_rate": float(success[mask].mean()),
+                    "failures": dict(sorted(kinds.items())),
+                }
+            )
+    return groups
 
 
 def success_by_fixture_error(
     result: dict, edges_mm: tuple[float, ...] = FIXTURE_ERROR_EDGES_MM
 ) -> list[dict]:
-    """Success in groups of the unseen fixture position error |dp| (mm), from an
-    evaluation's episode table (so stored evaluations can be regrouped): a list of
-    ``{"from_mm", "to_mm", "n", "success_rate"}``, empty groups left out. It tells
+    """Success in groups of the unseen fixture position error |dp| (mm): a list of
+    ``{"from_mm", "to_mm", "n", "success_rate"}`` (:func:`success_by_group`). It tells
     whether a residual searches (success where the DMP's landing misses the hole) or
     only keeps the DMP's successes."""
-    if len(edges_mm) < 2 or any(b <= a for a, b in itertools.pairwise(edges_mm)):
-        raise ValueError(f"edges_mm must increase, got {edges_mm}")
-    table = result["episode_table"]
-    error = np.asarray(table["fixture_error_mm"], dtype=float)
-    success = np.asarray(table["success"], dtype=float)
-    groups = []
-    for low, high in itertools.pairwise(edges_mm):
-        mask = (error >= low) & (error < high)
-        if np.any(mask):
-            groups.append(
-                {
-                    "from_mm": low,
-                    "to_mm": high,
-                    "n": int(mask.sum()),
-                    "success_rate": float(success[mask].mean()),
-                }
-            )
-    return groups
+    try:
+        groups = success_by_group(result, "fixture_position", edges_mm)
+    except ValueError as error:
+        raise ValueError(f"edges_mm: {error}") from error
+    return [
+        {"from_mm": g["from"], "to_mm": g["to"], "n": g["n"], "success_rate": g["success_rate"]}
+        for g in groups
+    ]
 
 
 def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeResult]) -> dict:
@@ -544,6 +587,18 @@ def evaluation_markdown(result: dict) -> str:
             f"| {group['from_mm']:g} to {group['to_mm']:g} | {group['n']} | "
             f"{_fmt(group['success_rate'], 100)} |"
         )
+    if EPISODE_GROUPINGS["fixture_rotation"][0] in r["episode_table"]:
+        lines += [
+            "",
+            "| unseen fixture rotation deg | n | success % | failures |",
+            "|---|---|---|---|",
+        ]
+        for group in success_by_group(r, "fixture_rotation"):
+            failures = ", ".join(f"{k} {v}" for k, v in group["failures"].items()) or "none"
+            lines.append(
+                f"| {group['from']:g} to {group['to']:g} | {group['n']} | "
+                f"{_fmt(group['success_rate'], 100)} | {failures} |"
+            )
     lines += _peak_force_lines(r["episode_table"])
     failures = ", ".join(f"{k} {v}" for k, v in r["failures"].items()) or "none"
     lines += ["", f"Failures: {failures}. Wall time {r['wall_time_s']:.0f} s.", ""]
