@@ -20,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+from rlfd_drake.control_math import keep_residual_part
 
 __all__ = [
     "BASE_CORRECTIONS",
@@ -62,11 +63,14 @@ def add_base_correction(base: np.ndarray, learned: np.ndarray) -> np.ndarray:
 
 class BaseCorrectedPolicy:
     """A residual policy (obs -> 6-D action, with ``reset()``) run on top of a rule, as
-    the diagram's ``ResidualPolicy`` calls it in evaluations."""
+    the diagram's ``ResidualPolicy`` calls it in evaluations (the diagram applying the
+    full residual); only the ``learned_mode`` part of the learned action is added."""
 
-    def __init__(self, base, learned):
+    def __init__(self, base, learned, learned_mode: str = "full"):
+        keep_residual_part(np.zeros(6), learned_mode)  # ValueError naming a bad mode
         self.base = base
         self.learned = learned
+        self.learned_mode = learned_mode
 
     def reset(self) -> None:
         for part in (self.base, self.learned):
@@ -74,16 +78,20 @@ class BaseCorrectedPolicy:
                 part.reset()
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
-        return add_base_correction(self.base(observation), self.learned(observation))
+        learned = keep_residual_part(self.learned(observation), self.learned_mode)
+        return add_base_correction(self.base(observation), learned)
 
 
 class BaseCorrectedAction(gym.Wrapper):
     """An RlfdEnv whose (6-D) action is added to the rule's action on the observation the
-    agent acted on, for training: the env applies the sum, the agent keeps its own."""
+    agent acted on, for training: the env (residual mode "full") applies the sum, the
+    agent keeps its own. Only the ``learned_mode`` part of the agent's action is added."""
 
-    def __init__(self, env: gym.Env, base_correction: str):
+    def __init__(self, env: gym.Env, base_correction: str, learned_mode: str = "full"):
+        keep_residual_part(np.zeros(6), learned_mode)  # ValueError naming a bad mode
         super().__init__(env)
         self.base = make_base_correction(base_correction)
+        self.learned_mode = learned_mode
         self._observation: np.ndarray | None = None
 
     def reset(self, **kwargs):
@@ -95,7 +103,8 @@ class BaseCorrectedAction(gym.Wrapper):
     def step(self, action):
         if self._observation is None:
             raise RuntimeError("BaseCorrectedAction.step before reset")
-        applied = add_base_correction(self.base(self._observation), action).astype(np.float32)
+        learned = keep_residual_part(action, self.learned_mode)
+        applied = add_base_correction(self.base(self._observation), learned).astype(np.float32)
         observation, reward, terminated, truncated, info = self.env.step(applied)
         self._observation = np.asarray(observation)
         return observation, reward, terminated, truncated, info

@@ -150,9 +150,16 @@ def _cmd_view(args: argparse.Namespace) -> int:
         )
     # The parts of the residual the policy was trained to set (see rlfd evaluate).
     residual_mode = trained_mode(args.policy)
-    policy = make_policy(args.policy, residual_mode, episode_seed=args.seed)
     dmp_model = load_task_dmp(task)
     spec = make_episode_specs(task, 1, args.seed, grid=False)[0]
+    policy = make_policy(
+        args.policy,
+        residual_mode,
+        episode_seed=args.seed,
+        task=task,
+        dmp=dmp_model,
+        fixture_dq=spec.fixture_dq,
+    )
     meshcat = Meshcat()
     LookAtWorkCell(meshcat, NominalGoal(task))
     print(f"Meshcat: {meshcat.web_url()}", flush=True)

@@ -254,6 +254,25 @@ def pad_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
     return full
 
 
+def keep_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
+    """The 6-D residual ``action`` with only its ``mode`` part kept ("full": all of it;
+    "translation" / "orientation": that half, the other zero; "off": none)."""
+    action = np.asarray(action, dtype=float).reshape(-1)
+    if action.shape != (6,):
+        raise ValueError(f"action must be 6 numbers, got {action!r}")
+    if mode == "full":
+        return action.copy()
+    if mode == "off":
+        return np.zeros(6)
+    if mode not in RESIDUAL_PARTS:
+        raise ValueError(
+            f"residual mode must be one of full, off, {', '.join(RESIDUAL_PARTS)}; got {mode!r}"
+        )
+    kept = np.zeros(6)
+    kept[RESIDUAL_PARTS[mode]] = action[RESIDUAL_PARTS[mode]]
+    return kept
+
+
 def scale_residual(
     residual: np.ndarray,
     max_translation_m: float,

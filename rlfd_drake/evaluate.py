@@ -9,6 +9,9 @@ Policies are named by a string, so that worker processes can build their own:
   randomised follows ``residual_mode``), reseeded per episode from (seed, episode).
 * ``"force_search"``: a hand-written force-guided search (not a paper baseline: a
   reference for what the observation allows; see ``baselines/force_guided.py``).
+* ``"slope"`` / ``"fixture_oracle"``: a constant rotation that undoes the table slope /
+  the episode's whole fixture rotation (references that know what the robot does not;
+  ``baselines/orientation_reference.py``), e.g. ``"force_search|fixture_oracle"``.
 * a path to a Stable-Baselines3 model ``.zip`` (PPO, SAC, TD3 or sb3-contrib
   RecurrentPPO, told apart by the zip's metadata; ``"ppo:path"``, ``"sac:path"``,
   ``"td3:path"``, ``"recurrent_ppo:path"`` force the class), run deterministically.
@@ -54,6 +57,7 @@ from rlfd_drake.tasks import TaskSpec, load_task
 
 __all__ = [
     "EPISODE_GROUPINGS",
+    "diagram_residual_mode",
     "RESULT_KEYS",
     "evaluate",
     "evaluation_name",
@@ -94,7 +98,7 @@ RESULT_KEYS = (
 #: per process: ``make_policy`` runs for every episode.
 _MODEL_CACHE: dict[str, tuple[object, str | None]] = {}
 #: Policies named by a word rather than a file.
-NAMED_POLICIES = ("dmp", "random", "force_search")
+NAMED_POLICIES = ("dmp", "random", "force_search", "slope", "fixture_oracle")
 
 
 def make_policy(
@@ -105,6 +109,7 @@ def make_policy(
     task: TaskSpec | None = None,
     dmp=None,
     noise_scale: float = 1.0,
+    fixture_dq=None,
 ):
     """The residual policy of ``policy_spec`` for one episode (None for "dmp").
 
@@ -113,6 +118,8 @@ def make_policy(
     baseline ``.npz`` is allowed here only as a part of a split spec (whole, it may
     replace the DMP: see ``_init_worker``); ``task`` and ``dmp`` are then needed.
     ``noise_scale`` scales a saved model's sampling noise (see DeployedPolicy).
+    ``fixture_dq`` is the episode's fixture rotation error, which only
+    ``"fixture_oracle"`` reads (and needs).
     """
     if "|" in policy_spec:
         from rlfd_drake.baselines.split import SplitResidualPolicy
@@ -125,7 +132,14 @@ def make_policy(
                 parts[0], "translation", episode_seed, deterministic, task, dmp, noise_scale
             ),
             make_policy(
-                parts[1], "orientation", episode_seed + 1, deterministic, task, dmp, noise_scale
+                parts[1],
+                "orientation",
+                episode_seed + 1,
+                deterministic,
+                task,
+                dmp,
+                noise_scale,
+                fixture_dq,
             ),
         )
     if policy_spec == "dmp":
@@ -146,6 +160,19 @@ def make_policy(
         from rlfd_drake.baselines.force_guided import ForceGuidedSearch
 
         return ForceGuidedSearch()
+    if policy_spec in ("slope", "fixture_oracle"):
+        from rlfd_drake.baselines.orientation_reference import (
+            fixture_rotation_residual,
+            slope_residual,
+        )
+
+        if task is None:
+            raise ValueError(f"{policy_spec}: a constant rotation reference needs the task")
+        if policy_spec == "slope":
+            return slope_residual(task)
+        if fixture_dq is None:
+            raise ValueError("fixture_oracle needs the episode's fixture error (rlfd evaluate)")
+        return fixture_rotation_residual(task, fixture_dq)
     if policy_spec == "random":
         from rlfd_drake.baselines.random_policy import RandomResidualPolicy
 
@@ -177,8 +204,9 @@ def make_policy(
         return policy
     from rlfd_drake.base_correction import BaseCorrectedPolicy, make_base_correction
 
-    # Trained on top of a rule: it acts on top of the same rule.
-    return BaseCorrectedPolicy(make_base_correction(base_correction), policy)
+    # Trained on top of a rule: it acts on top of the same rule, on its own part of the
+    # residual (the diagram applies the whole: see evaluate's diagram_mode).
+    return BaseCorrectedPolicy(make_base_correction(base_correction), policy, residual_mode)
 
 
 # --------------------------------------------------------------------------------------
@@ -221,6 +249,7 @@ def _init_worker(
             task=task,
             dmp=_WORKER["dmp"],
             noise_scale=noise_scale,
+            fixture_dq=(1.0, 0.0, 0.0, 0.0),  # a check: each episode passes its own
         )
 
 
@@ -245,6 +274,7 @@ def _run_one(job: tuple[int, int, EpisodeSpec]) -> tuple[int, EpisodeResult]:
         _WORKER["task"],
         _WORKER["dmp"],
         _WORKER["noise_scale"],
+        spec.fixture_dq,
     )
     result = run_episode(
         _WORKER["task"], _WORKER["dmp"], spec, policy=policy, diagram_config=_WORKER["config"]
@@ -443,9 +473,11 @@ def evaluate(
         seed: seed of the starts, fixture errors and random policies.
         workers: processes (spawn); 1 runs in this process.
         grid: the paper's evaluation grid (True) or training-style random starts.
-        residual_mode: "full", "translation", "orientation" or "off" (composer mode).
+        residual_mode: "full", "translation", "orientation" or "off" (composer mode;
+            for a policy trained on a base correction, the part it corrects: the
+            diagram then applies the full residual, the rule's and that part).
         diagram_config: rates and gains (default RlfdDiagramConfig()); its
-            residual_mode is replaced by ``residual_mode``.
+            residual_mode is replaced by ``residual_mode`` (or "full", above).
         progress: show a tqdm progress bar.
         deterministic: a trained policy acts with its mean (True) or samples from its
             Gaussian, seeded per episode (False).
@@ -492,7 +524,7 @@ def evaluate(
             DeployedPolicy(load_sb3_model(part)[0], deterministic=False, noise_scale=noise_scale)
     config = replace(
         diagram_config if diagram_config is not None else RlfdDiagramConfig(),
-        residual_mode=residual_mode,
+        residual_mode=diagram_residual_mode(policy_spec, residual_mode),
         composition=composition,
     )
     specs = make_episode_specs(task, episodes, seed, grid)
@@ -809,6 +841,15 @@ def policy_stem(spec: str) -> str:
         return "_and_".join(policy_stem(part) for part in spec.split("|"))
     path = policy_file(spec)
     return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
+
+
+def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:
+    """The residual mode the diagram runs ``policy_spec`` with: ``residual_mode``, or
+    "full" for a policy trained on a base correction (it corrects its residual_mode
+    part; the rule acts on the whole residual)."""
+    if "|" in policy_spec or not policy_spec.endswith(".zip"):
+        return residual_mode
+    return "full" if trained_base_correction(policy_file(policy_spec)) else residual_mode
 
 
 def trained_mode(policy_spec: str) -> str:

@@ -638,7 +638,11 @@ def sample_fixture_error(task: TaskSpec, rng: np.random.Generator) -> tuple[np.n
     dp = rng.uniform(-bound, bound)
     angle = math.radians(rng.uniform(0.0, err.rotation_bound_deg))
     q_random = quat_from_angle_axis(angle, _random_unit_vector(rng))
-    q_slope = quat_from_angle_axis(
-        math.radians(err.table_slope_deg), np.asarray(err.table_slope_axis)
-    )
-    return dp, quat_multiply(q_slope, q_random)
+    return dp, quat_multiply(table_slope_quaternion(task), q_random)
+
+
+def table_slope_quaternion(task: TaskSpec) -> np.ndarray:
+    """The table slope's rotation (wxyz, in F): the part of the fixture error that is
+    the same in every episode (``sample_fixture_error``)."""
+    err = task.fixture_error
+    return quat_from_angle_axis(math.radians(err.table_slope_deg), np.asarray(err.table_slope_axis))

@@ -152,7 +152,8 @@ class TrainConfig:
         base_correction: a hand-written rule (``base_correction.BASE_CORRECTIONS``,
             e.g. "force_search") whose action the learned residual is added to, in
             training and in evaluations (residual RL on the DMP plus that rule); None =
-            the paper's rLfD, the residual on the DMP alone.
+            the paper's rLfD, the residual on the DMP alone. The rule acts on the whole
+            residual, the learner on its ``residual_mode`` part.
         timeout_terminal: the learner treats the end of an episode's time as terminal
             (``env.TimeLimitAsTerminal``: the observation carries the time, so waiting
             until it runs out scores 0) instead of bootstrapping it as a truncation
@@ -299,7 +300,9 @@ def _env_kwargs(config: TrainConfig) -> dict:
     return {
         "task": task,
         "reward": config.reward,
-        "residual_mode": config.residual_mode,
+        # On a base correction the diagram applies the whole residual: the rule's and
+        # the learner's part (see wrap_training_env).
+        "residual_mode": "full" if config.base_correction is not None else config.residual_mode,
         "composition": config.composition,
         "force_limit_penalty": config.force_limit_penalty,
         "peak_force_cost": config.peak_force_cost,
@@ -325,7 +328,7 @@ def wrap_training_env(
     if timeout_terminal:
         env = TimeLimitAsTerminal(env)
     if base_correction is not None:
-        env = BaseCorrectedAction(env, base_correction)
+        env = BaseCorrectedAction(env, base_correction, learned_mode=residual_mode)
     if applied_action_only:
         env = AppliedResidualAction(env, residual_mode)
     return env

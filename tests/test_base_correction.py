@@ -89,7 +89,7 @@ def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():
 
 def test_a_run_trained_on_the_rule_is_evaluated_on_it(tmp_path):
     import rlfd_drake.evaluate as evaluate_module
-    from rlfd_drake.evaluate import make_policy
+    from rlfd_drake.evaluate import diagram_residual_mode, make_policy
     from rlfd_drake.train import make_envs, make_model
 
     config = TrainConfig(
@@ -118,14 +118,17 @@ def test_a_run_trained_on_the_rule_is_evaluated_on_it(tmp_path):
         policy.reset()
         np.testing.assert_allclose(
             policy(observation),
-            np.clip(ForceGuidedSearch()(observation) + learned, -1.0, 1.0),
+            np.clip(ForceGuidedSearch()(observation) + learned * [1, 1, 1, 0, 0, 0], -1.0, 1.0),
             atol=1e-7,
         )
+        # The rule acts on the whole residual: the diagram applies all of it.
+        assert diagram_residual_mode(str(path), "translation") == "full"
     # Without the configuration the policy alone is run, as before (in a new process:
     # a process reads a policy's file and configuration once).
     (run / "config.json").unlink()
     evaluate_module._MODEL_CACHE.clear()
     assert not isinstance(make_policy(str(run / "policy.zip"), "translation"), BaseCorrectedPolicy)
+    assert diagram_residual_mode(str(run / "policy.zip"), "translation") == "translation"
 
 
 def test_the_cli_offers_exactly_the_known_rules():
@@ -136,3 +139,26 @@ def test_the_cli_offers_exactly_the_known_rules():
     option = next(a for a in train_parser._actions if a.dest == "base_correction")
     assert sorted(option.choices) == sorted(BASE_CORRECTIONS)
     assert option.default is None
+
+
+def test_the_learner_corrects_only_its_part_on_top_of_the_rule():
+    """--residual-mode orientation on the force search: the rule steers, the learner
+    turns; the learner's translation outputs are not applied, the env applies all."""
+    from rlfd_drake.train import _env_kwargs
+
+    env = _RecordingEnv()
+    wrapped = BaseCorrectedAction(env, "force_search", learned_mode="orientation")
+    wrapped.reset(seed=0)
+    wrapped.step(np.array([0.25, 0.5, -0.5, 0.1, -0.2, 0.3], dtype=np.float32))
+    np.testing.assert_allclose(env.actions[-1], [0, 0, 0, 0.1, -0.2, 0.3], atol=1e-7)
+    wrapped.step(np.array([0.25, 0.5, -0.5, 0.1, -0.2, 0.3], dtype=np.float32))
+    np.testing.assert_allclose(env.actions[-1], [1.0, 0.0, 1.0, 0.1, -0.2, 0.3], atol=1e-7)
+    policy = BaseCorrectedPolicy(ForceGuidedSearch(), lambda obs: np.full(6, 0.5), "orientation")
+    np.testing.assert_allclose(policy(_pressed_observation()), [1, 0, 1, 0.5, 0.5, 0.5])
+    config = TrainConfig(residual_mode="orientation", base_correction="force_search")
+    assert _env_kwargs(config)["residual_mode"] == "full"
+    assert _env_kwargs(TrainConfig(residual_mode="orientation"))["residual_mode"] == "orientation"
+    with pytest.raises(ValueError, match="residual mode must be one of .*'sideways'"):
+        BaseCorrectedAction(_RecordingEnv(), "force_search", learned_mode="sideways")
+    with pytest.raises(ValueError, match="residual mode must be one of .*'sideways'"):
+        BaseCorrectedPolicy(ForceGuidedSearch(), policy, "sideways")

@@ -1,6 +1,7 @@
 """The scalar hot-loop maths of control_math against the array implementations."""
 
 import numpy as np
+import pytest
 
 from rlfd_drake.control_math import (
     quat_exp_rotation_vector,
@@ -59,3 +60,17 @@ def test_left_jacobian_inverse_apply_matches_matrix():
         np.testing.assert_allclose(
             so3_left_jacobian_inverse_apply(r, w), so3_left_jacobian_inverse(r) @ w, atol=1e-10
         )
+
+
+def test_keep_residual_part_keeps_one_half_and_names_a_bad_mode():
+    from rlfd_drake.control_math import keep_residual_part
+
+    action = np.arange(1.0, 7.0)
+    np.testing.assert_array_equal(keep_residual_part(action, "full"), action)
+    np.testing.assert_array_equal(keep_residual_part(action, "translation"), [1, 2, 3, 0, 0, 0])
+    np.testing.assert_array_equal(keep_residual_part(action, "orientation"), [0, 0, 0, 4, 5, 6])
+    np.testing.assert_array_equal(keep_residual_part(action, "off"), np.zeros(6))
+    with pytest.raises(ValueError, match="'twist'"):
+        keep_residual_part(action, "twist")
+    with pytest.raises(ValueError, match="6 numbers"):
+        keep_residual_part(action[:3], "full")
