@@ -140,7 +140,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.realtime_rate) and args.realtime_rate >= 0):
         raise ValueError(f"--realtime-rate must be >= 0, got {args.realtime_rate}")
     task = load_task(args.task)
-    from rlfd_drake.evaluate import NAMED_POLICIES, trained_mode
+    from rlfd_drake.evaluate import NAMED_POLICIES, diagram_residual_mode, trained_mode
     from rlfd_drake.policies import policy_file
 
     if args.policy not in NAMED_POLICIES and not policy_file(args.policy).is_file():
@@ -168,7 +168,9 @@ def _cmd_view(args: argparse.Namespace) -> int:
         dmp_model,
         spec,
         policy,
-        diagram_config=RlfdDiagramConfig(residual_mode=residual_mode),
+        diagram_config=RlfdDiagramConfig(
+            residual_mode=diagram_residual_mode(args.policy, residual_mode)
+        ),
         meshcat=meshcat,
         record_html=html,
         realtime_rate=None if html is not None else args.realtime_rate,

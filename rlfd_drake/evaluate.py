@@ -205,7 +205,7 @@ def make_policy(
     from rlfd_drake.base_correction import BaseCorrectedPolicy, make_base_correction
 
     # Trained on top of a rule: it acts on top of the same rule, on its own part of the
-    # residual (the diagram applies the whole: see evaluate's diagram_mode).
+    # residual (the diagram applies the whole: diagram_residual_mode).
     return BaseCorrectedPolicy(make_base_correction(base_correction), policy, residual_mode)
 
 
