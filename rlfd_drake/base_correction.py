@@ -27,6 +27,7 @@ __all__ = [
     "BaseCorrectedAction",
     "BaseCorrectedPolicy",
     "add_base_correction",
+    "applied_residual_mode",
     "check_base_correction",
     "make_base_correction",
 ]
@@ -47,6 +48,12 @@ def make_base_correction(name: str):
     """A new instance of the rule ``name``; ValueError naming an unknown one."""
     check_base_correction(name)
     return BASE_CORRECTIONS[name]()
+
+
+def applied_residual_mode(base_correction: str | None, learned_mode: str) -> str:
+    """The residual mode the diagram runs a learner with: its own (``learned_mode``), or
+    "full" on a base correction, whose rule acts on the whole residual."""
+    return learned_mode if base_correction is None else "full"
 
 
 def add_base_correction(base: np.ndarray, learned: np.ndarray) -> np.ndarray:

@@ -257,19 +257,16 @@ def pad_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
 def keep_residual_part(action: np.ndarray, mode: str) -> np.ndarray:
     """The 6-D residual ``action`` with only its ``mode`` part kept ("full": all of it;
     "translation" / "orientation": that half, the other zero; "off": none)."""
+    if mode not in RESIDUAL_MODES:
+        raise ValueError(f"residual mode must be one of {RESIDUAL_MODES}, got {mode!r}")
     action = np.asarray(action, dtype=float).reshape(-1)
     if action.shape != (6,):
         raise ValueError(f"action must be 6 numbers, got {action!r}")
-    if mode == "full":
-        return action.copy()
-    if mode == "off":
-        return np.zeros(6)
-    if mode not in RESIDUAL_PARTS:
-        raise ValueError(
-            f"residual mode must be one of full, off, {', '.join(RESIDUAL_PARTS)}; got {mode!r}"
-        )
     kept = np.zeros(6)
-    kept[RESIDUAL_PARTS[mode]] = action[RESIDUAL_PARTS[mode]]
+    if mode in ("full", "translation"):
+        kept[RESIDUAL_PARTS["translation"]] = action[RESIDUAL_PARTS["translation"]]
+    if mode in ("full", "orientation"):
+        kept[RESIDUAL_PARTS["orientation"]] = action[RESIDUAL_PARTS["orientation"]]
     return kept
 
 
@@ -296,19 +293,14 @@ def scale_residual(
     Returns:
         (dp (3,) m, rotation vector (3,) rad), world frame.
     """
-    if mode not in RESIDUAL_MODES:
-        raise ValueError(f"residual mode must be one of {RESIDUAL_MODES}, got {mode!r}")
-    a = np.clip(np.asarray(residual, dtype=float).reshape(6), -1.0, 1.0)
-    dp = a[:3] * max_translation_m if mode in ("full", "translation") else np.zeros(3)
+    a = np.clip(keep_residual_part(residual, mode), -1.0, 1.0)
+    dp = a[:3] * max_translation_m
     if max_push_m is not None:
         dp[2] = max(dp[2], -max_push_m)
-    if mode in ("full", "orientation"):
-        rotvec = a[3:] * max_rotation_rad
-        alpha = float(np.sqrt(rotvec @ rotvec))
-        if alpha > np.pi:
-            rotvec = rotvec * (np.pi / alpha)
-    else:
-        rotvec = np.zeros(3)
+    rotvec = a[3:] * max_rotation_rad
+    alpha = float(np.sqrt(rotvec @ rotvec))
+    if alpha > np.pi:
+        rotvec = rotvec * (np.pi / alpha)
     return dp, rotvec
 
 

@@ -849,7 +849,9 @@ def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:
     part; the rule acts on the whole residual)."""
     if "|" in policy_spec or not policy_spec.endswith(".zip"):
         return residual_mode
-    return "full" if trained_base_correction(policy_file(policy_spec)) else residual_mode
+    from rlfd_drake.base_correction import applied_residual_mode
+
+    return applied_residual_mode(trained_base_correction(policy_file(policy_spec)), residual_mode)
 
 
 def trained_mode(policy_spec: str) -> str:

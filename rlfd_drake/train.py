@@ -38,7 +38,11 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
-from rlfd_drake.base_correction import BaseCorrectedAction, check_base_correction
+from rlfd_drake.base_correction import (
+    BaseCorrectedAction,
+    applied_residual_mode,
+    check_base_correction,
+)
 from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import (
@@ -300,9 +304,7 @@ def _env_kwargs(config: TrainConfig) -> dict:
     return {
         "task": task,
         "reward": config.reward,
-        # On a base correction the diagram applies the whole residual: the rule's and
-        # the learner's part (see wrap_training_env).
-        "residual_mode": "full" if config.base_correction is not None else config.residual_mode,
+        "residual_mode": applied_residual_mode(config.base_correction, config.residual_mode),
         "composition": config.composition,
         "force_limit_penalty": config.force_limit_penalty,
         "peak_force_cost": config.peak_force_cost,
