@@ -406,6 +406,17 @@ def _parse_targets(items: list[str]) -> dict[str, float]:
     return targets
 
 
+def _cmd_keep(args: argparse.Namespace) -> int:
+    from rlfd_drake.run_log import keep_run_log
+
+    if args.name is not None and len(args.runs) > 1:
+        raise ValueError(f"--name names one run's log, got {len(args.runs)} runs")
+    for run in args.runs:
+        kept = keep_run_log(run, name=args.name, overwrite=args.overwrite)
+        print(f"kept {run} in {kept}")
+    return 0
+
+
 def _cmd_seeds(args: argparse.Namespace) -> int:
     from rlfd_drake.seed_study import format_spread, seed_study
 
@@ -795,6 +806,15 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--seed", type=int, default=0)
     reproduce.add_argument("--workers", type=int, default=2)
     reproduce.set_defaults(func=_cmd_reproduce)
+
+    keep = sub.add_parser(
+        "keep",
+        help="copy training runs' logs (configuration, metrics, episodes) to results/train_<run>/",
+    )
+    keep.add_argument("runs", nargs="+", help="run folders (runs/<name>)")
+    keep.add_argument("--name", default=None, help="results/train_<name> (one run only)")
+    keep.add_argument("--overwrite", action="store_true", help="replace a kept log")
+    keep.set_defaults(func=_cmd_keep)
 
     seeds = sub.add_parser(
         "seeds", help="a training recipe's success over seeds (one run folder per seed)"

@@ -52,7 +52,14 @@ from rlfd_drake.policies import (
     trained_base_correction,
     trained_residual_mode,
 )
-from rlfd_drake.results import compact_png, results_dir, write_result
+from rlfd_drake.results import (
+    compact_png,
+    episodes_path,
+    read_episodes,
+    results_dir,
+    write_episodes,
+    write_result,
+)
 from rlfd_drake.tasks import TaskSpec, load_task
 
 __all__ = [
@@ -823,11 +830,20 @@ def write_evaluation(
 ) -> dict[str, Path]:
     """Writes ``results/<name>.json`` (via ``results.write_result``: command, seed,
     date), ``results/<name>.md`` and, with ``plot``, ``results/<name>.png`` (the JSON
-    keeps what any plot needs: ``rlfd plot`` draws it later); returns their paths."""
-    json_path = write_result(name, result, seed=result.get("seed"), command=command)
+    keeps what any plot needs: ``rlfd plot`` draws it later); returns their paths.
+    The per-episode table goes to ``results/<name>.episodes.json.gz`` (named in the
+    JSON's ``episode_table_file``); :func:`result_from_json` joins them again."""
+    summary = {key: value for key, value in result.items() if key != "episode_table"}
+    table = result.get("episode_table")
+    if table is not None:
+        summary["episode_table_file"] = episodes_path(f"{name}.json").name
+    json_path = write_result(name, summary, seed=result.get("seed"), command=command)
+    paths = {"json": json_path}
+    if table is not None:
+        paths["episodes"] = write_episodes(json_path, table)
     md_path = results_dir() / f"{name}.md"
     md_path.write_text(evaluation_markdown(result))
-    paths = {"json": json_path, "md": md_path}
+    paths["md"] = md_path
     if plot:
         paths["png"] = plot_success_vs_perturbation([result], results_dir() / f"{name}.png")
     return paths
@@ -889,8 +905,14 @@ def sampling_suffix(noise_scale: float = 1.0) -> str:
 
 
 def result_from_json(path: str | Path) -> dict:
-    """The evaluation dict stored in a ``write_evaluation`` JSON file."""
-    return json.loads(Path(path).read_text())["data"]
+    """The evaluation dict stored in a ``write_evaluation`` JSON file, with its
+    per-episode table (kept in the JSON itself by evaluations stored before the table
+    had a file of its own)."""
+    result = json.loads(Path(path).read_text())["data"]
+    if "episode_table" not in result and result.get("episode_table_file"):
+        result["episode_table"] = read_episodes(path)
+        del result["episode_table_file"]
+    return result
 
 
 def episode_result_dict(result: EpisodeResult) -> dict:

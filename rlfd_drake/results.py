@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import gzip
 import json
 import platform
 import shlex
@@ -96,6 +97,33 @@ def write_result(
     path = results_dir() / f"{name}.json"
     path.write_text(format_json(record) + "\n")
     return path
+
+
+EPISODES_SUFFIX = ".episodes.json.gz"
+
+
+def episodes_path(json_path: str | Path) -> Path:
+    """The compressed per-episode file beside ``results/<name>.json``."""
+    json_path = Path(json_path)
+    return json_path.with_name(json_path.name.removesuffix(".json") + EPISODES_SUFFIX)
+
+
+def write_episodes(json_path: str | Path, table: dict) -> Path:
+    """Writes a per-episode table (column name -> list) gzip-compressed beside its
+    result: the per-episode columns are most of a result's bytes and repeat a lot, so
+    compressed they are about a fifth; ``mtime=0`` keeps a re-run's bytes the same."""
+    path = episodes_path(json_path)
+    text = json.dumps(_to_jsonable(table), separators=(",", ":"))
+    path.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))
+    return path
+
+
+def read_episodes(json_path: str | Path) -> dict:
+    """The per-episode table ``write_episodes`` stored beside ``json_path``."""
+    path = episodes_path(json_path)
+    if not path.is_file():
+        raise ValueError(f"episodes: no per-episode file {str(path)!r} beside its result")
+    return json.loads(gzip.decompress(path.read_bytes()))
 
 
 def compact_png(path: str | Path, colors: int = 64) -> Path:

@@ -16,6 +16,7 @@ from rlfd_drake.evaluate import (
     evaluate,
     evaluation_markdown,
     make_policy,
+    result_from_json,
     success_by_fixture_error,
     write_evaluation,
 )
@@ -87,7 +88,21 @@ def test_write_evaluation(dmp_result, tmp_path, monkeypatch):
     old = {**dmp_result, "episode_table": dict(dmp_result["episode_table"])}
     del old["episode_table"]["peak_force_time_s"], old["episode_table"]["peak_force_distance_mm"]
     assert "peak force felt" not in evaluation_markdown(old)
-    assert set(paths) == {"json", "md"}  # no plot unless asked: results/ stays small
+    assert set(paths) == {"json", "episodes", "md"}  # no plot unless asked
+    # The per-episode table lives compressed beside the JSON, and reads back joined.
+    assert "episode_table" not in record["data"]
+    assert paths["episodes"].name == "eval_test.episodes.json.gz"
+    assert result_from_json(paths["json"]) == json.loads(json.dumps(dmp_result))
+    # An evaluation stored with its table inside the JSON (before it had its own file)
+    # still reads back whole, and a missing table file is named in a ValueError.
+    record["data"]["episode_table"] = dmp_result["episode_table"]
+    del record["data"]["episode_table_file"]
+    old_layout = tmp_path / "results" / "eval_old.json"
+    old_layout.write_text(json.dumps(record))
+    assert result_from_json(old_layout) == json.loads(json.dumps(dmp_result))
+    paths["episodes"].unlink()
+    with pytest.raises(ValueError, match="eval_test.episodes.json.gz"):
+        result_from_json(paths["json"])
     assert not (tmp_path / "results" / "eval_test.png").exists()
     paths = write_evaluation(dmp_result, "eval_test", command="rlfd evaluate test", plot=True)
     assert paths["png"].read_bytes()[:4] == b"\x89PNG"

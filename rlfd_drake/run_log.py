@@ -1,0 +1,57 @@
+"""A training run's log kept in ``results/`` (``rlfd keep``).
+
+Run folders (``runs/<name>/``: policy, checkpoints, TensorBoard curves) stay local and
+are not committed. What a reader needs to check a reported run is its configuration
+with the command that trained it, its metrics and its per-episode log: those are
+copied to ``results/train_<name>/``, the per-episode CSV gzip-compressed (one short
+line per episode, about a fifth of the bytes compressed), where ``rlfd seeds`` and
+``rlfd reproduce`` find a run whose folder is not on this machine.
+"""
+
+from __future__ import annotations
+
+import gzip
+import shutil
+from pathlib import Path
+
+from rlfd_drake.results import check_result_name, results_dir
+
+__all__ = ["keep_run_log", "read_episode_log"]
+
+#: Files of a run folder that are copied as they are; config.json is required.
+_COPIED = ("config.json", "metrics.json")
+_EPISODES = "episodes.csv"
+
+
+def keep_run_log(run_dir: str | Path, name: str | None = None, overwrite: bool = False) -> Path:
+    """Copies ``run_dir``'s config.json, metrics.json (absent while a run is stopped
+    before its end) and episodes.csv (as episodes.csv.gz) to
+    ``results/train_<name>/`` (``name`` defaults to the folder's name); returns that
+    folder. An existing kept log is replaced only with ``overwrite``."""
+    run_dir = Path(run_dir)
+    for required in ("config.json", _EPISODES):
+        if not (run_dir / required).is_file():
+            raise ValueError(f"run_dir: {str(run_dir)!r} has no {required} (not a training run)")
+    name = run_dir.name if name is None else name
+    check_result_name(name)
+    kept = results_dir() / f"train_{name}"
+    if kept.exists() and not overwrite:
+        raise FileExistsError(f"{kept} exists; pass --overwrite to replace it, or --name")
+    kept.mkdir(parents=True, exist_ok=True)
+    for file in _COPIED:
+        if (run_dir / file).is_file():
+            shutil.copyfile(run_dir / file, kept / file)
+    data = (run_dir / _EPISODES).read_bytes()
+    (kept / f"{_EPISODES}.gz").write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
+    (kept / _EPISODES).unlink(missing_ok=True)  # an uncompressed copy of an earlier keep
+    return kept
+
+
+def read_episode_log(folder: str | Path) -> str:
+    """The per-episode CSV of a run folder or of its kept log (compressed or not)."""
+    folder = Path(folder)
+    if (folder / _EPISODES).is_file():
+        return (folder / _EPISODES).read_text()
+    if (folder / f"{_EPISODES}.gz").is_file():
+        return gzip.decompress((folder / f"{_EPISODES}.gz").read_bytes()).decode()
+    raise ValueError(f"folder: {str(folder)!r} has no {_EPISODES} or {_EPISODES}.gz")
