@@ -184,6 +184,37 @@ RUNS["rlfd_gs4"] = {
     task: _run(f"runs/{task}_sac_gs4_s0", task, episodes, _SAC_GS4_FLAGS[task])
     for task, episodes in _FULL_POSE_EPISODES.items()
 }
+# Full-pose PPO with a narrower Gaussian (log std -2), contact features scaled to order
+# one and the episode's time limit learned as terminal (the RJ-45 turn's recipe,
+# results/rj45_study.md), 700 episodes: results/full_pose_study.md, section 8.
+_PPO_STD2_FLAGS = "--log-std-init -2.0 --scaled-observation --timeout-terminal"
+_PPO_STD2_EXTRA = {
+    "peg": "",
+    "gear": "",
+    "rj45": "--contact-torque-nm 0.05 --force-limit-penalty 1",
+}
+_PPO_STD2_TAG = {"peg": "so_tt", "gear": "so_tt", "rj45": "so_torque005_pen1_tt"}
+RUNS["rlfd_ppo_std2_tt"] = {
+    task: _run(
+        f"runs/{task}_ppo_std2_{_PPO_STD2_TAG[task]}_e700_s0",
+        task,
+        700,
+        f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip(),
+        algo="ppo",
+    )
+    for task in _PHYSICAL
+}
+# 700 more episodes of the same recipe from each 700-episode policy (a new optimiser).
+RUNS["rlfd_ppo_std2_tt_1400"] = {
+    task: _run(
+        f"runs/{task}_ppo_std2_so_tt_e700_then700_s0",
+        task,
+        700,
+        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_std2_tt'][task][0]}/policy.zip",
+        algo="ppo",
+    )
+    for task in ("peg", "gear")
+}
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -438,6 +469,16 @@ TABLES: dict[str, Table] = {
             ),
             Row("Random / Random", "random", {"peg": 91.0, "gear": 86.9, "rj45": 64.8}),
             *_mean_and_sampled("PPO / PPO (rLfD)", "run:rlfd_ppo", _PAPER_FULL_POSE_RLFD),
+            *_mean_and_sampled(
+                "PPO / PPO (rLfD), log std -2, time limit terminal, 700 episodes",
+                "run:rlfd_ppo_std2_tt",
+                _PAPER_FULL_POSE_RLFD,
+            ),
+            *_mean_and_sampled(
+                "PPO / PPO (rLfD), log std -2, time limit terminal, 1,400 episodes",
+                "run:rlfd_ppo_std2_tt_1400",
+                _PAPER_FULL_POSE_RLFD,
+            ),
             *_mean_and_sampled("SAC / SAC (rLfD)", "run:rlfd", _PAPER_FULL_POSE_RLFD),
             *_mean_and_sampled(
                 "SAC / SAC (rLfD), 4 updates per step",
@@ -731,6 +772,8 @@ def _cell(
         label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
         missing = f"no policy at {policy}"
     elif kind == "run":
+        if task not in RUNS[detail]:
+            return {"status": "not run", "reason": f"no {detail} run on {task}"}, None
         folder, command = RUNS[detail][task]
         run = Path(folder)
         # Run folders stay local; their logs are copied to results/train_<name>/, so a

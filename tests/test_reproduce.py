@@ -94,6 +94,15 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
     # A trained run folder is evaluated; a missing one says how to train it.
     sac = next(row for row in data["rows"] if row["label"] == "SAC / SAC (rLfD), mean action")
     assert "rlfd train --task peg --algo sac" in sac["ours"]["peg"]["reason"]
+    # A recipe run on some tasks only says which task it has no run on.
+    longer = next(row for row in data["rows"] if "1,400 episodes, mean" in row["label"])
+    assert longer["ours"]["rj45"] == {
+        "status": "not run",
+        "reason": "no rlfd_ppo_std2_tt_1400 run on rj45",
+    }
+    assert "--init-from runs/gear_ppo_std2_so_tt_e700_s0/policy.zip" in (
+        longer["ours"]["gear"]["reason"]
+    )
 
 
 def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
