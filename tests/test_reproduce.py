@@ -100,8 +100,9 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
         "status": "not run",
         "reason": "no rlfd_ppo_std2_tt_1400 run on rj45",
     }
-    assert "--init-from runs/gear_ppo_std2_so_tt_e700_s0/policy.zip" in (
-        longer["ours"]["gear"]["reason"]
+    assert (
+        "--init-from runs/gear_ppo_std2_so_tt_e700_s0/policy.zip"
+        in (longer["ours"]["gear"]["reason"])
     )
 
 
