@@ -329,6 +329,29 @@ _add_sac_transfer_runs(
 )
 
 
+def _run_log_file(run: Path, file: str) -> Path | None:
+    """``run``'s config.json or metrics.json: in the run folder, or (run folders stay
+    local) in its log copied to results/train_<name>/, which a fresh clone has."""
+    for folder in (run, results_dir() / f"train_{run.name}"):
+        if (folder / file).exists():
+            return folder / file
+    return None
+
+
+def _trained_episodes(run: Path) -> int | None:
+    """The training episodes behind ``run``'s policy: its own, plus those of the run it
+    started from (``--init-from``), so a policy trained in stages counts them all; None
+    when a stage's log is not here."""
+    metrics = _run_log_file(run, "metrics.json")
+    episodes = json.loads(metrics.read_text()).get("episodes") if metrics else None
+    config = _run_log_file(run, "config.json")
+    init_from = json.loads(config.read_text())["config"].get("init_from") if config else None
+    if episodes is None or init_from is None:
+        return episodes
+    earlier = _trained_episodes(Path(init_from).parent)
+    return None if earlier is None else episodes + earlier
+
+
 def _mean_and_sampled(
     label: str, source: str, paper: dict[str, float | None], **options
 ) -> list[Row]:
@@ -776,20 +799,7 @@ def _cell(
             return {"status": "not run", "reason": f"no {detail} run on {task}"}, None
         folder, command = RUNS[detail][task]
         run = Path(folder)
-        # Run folders stay local; their logs are copied to results/train_<name>/, so a
-        # fresh clone still finds the episode count (and its stored evaluations below).
-        metrics_file = next(
-            (
-                m
-                for m in (
-                    run / "metrics.json",
-                    results_dir() / f"train_{run.name}" / "metrics.json",
-                )
-                if m.exists()
-            ),
-            None,
-        )
-        trained = json.loads(metrics_file.read_text()).get("episodes") if metrics_file else None
+        trained = _trained_episodes(run)
         policy, label = str(run / "policy.zip"), run.name
         missing = f"no policy in {run} (train it: {command})"
     elif kind == "baseline":

@@ -112,6 +112,17 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
     run.mkdir(parents=True)
     (run / "policy.zip").write_bytes(b"")
     (run / "metrics.json").write_text(json.dumps({"episodes": 500}))
+    # A policy trained in two stages: the second here, the first's log in results/ only.
+    second = tmp_path / "runs" / "gear_ppo_std2_so_tt_e700_then700_s0"
+    first_log = tmp_path / "results" / "train_gear_ppo_std2_so_tt_e700_s0"
+    for folder, init_from in (
+        (second, "runs/gear_ppo_std2_so_tt_e700_s0/policy.zip"),
+        (first_log, None),
+    ):
+        folder.mkdir(parents=True)
+        (folder / "metrics.json").write_text(json.dumps({"episodes": 700}))
+        (folder / "config.json").write_text(json.dumps({"config": {"init_from": init_from}}))
+    (second / "policy.zip").write_bytes(b"")
     names = []
 
     def recording(*args, **kwargs):
@@ -127,6 +138,18 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
     assert rows["SAC / SAC (rLfD), mean action"]["gear"]["training_episodes"] == 500
     assert rows["SAC / SAC (rLfD), mean action"]["peg"]["status"] == "not run"
     assert "eval_gear_gear_sac_te1_s0_stochastic_n40_s0" in names
+    staged = rows["PPO / PPO (rLfD), log std -2, time limit terminal, 1,400 episodes, mean action"]
+    assert staged["gear"]["training_episodes"] == 1400
+    # Without the first stage's log the total is unknown, not the last stage's alone.
+    (first_log / "metrics.json").unlink()
+    data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    rows = {row["label"]: row["ours"] for row in data["rows"]}
+    assert (
+        rows["PPO / PPO (rLfD), log std -2, time limit terminal, 1,400 episodes, mean action"][
+            "gear"
+        ]["training_episodes"]
+        is None
+    )
 
 
 @pytest.mark.parametrize(("table", "budget"), [("9", "quick"), ("1", "huge")])
