@@ -44,6 +44,7 @@ from rlfd_drake.paths import (
     models_dir,
 )
 from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.run_log import run_log_file
 
 __all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table", "stored_or_new_evaluation"]
 
@@ -329,22 +330,13 @@ _add_sac_transfer_runs(
 )
 
 
-def _run_log_file(run: Path, file: str) -> Path | None:
-    """``run``'s config.json or metrics.json: in the run folder, or (run folders stay
-    local) in its log copied to results/train_<name>/, which a fresh clone has."""
-    for folder in (run, results_dir() / f"train_{run.name}"):
-        if (folder / file).exists():
-            return folder / file
-    return None
-
-
 def _trained_episodes(run: Path) -> int | None:
     """The training episodes behind ``run``'s policy: its own, plus those of the run it
     started from (``--init-from``), so a policy trained in stages counts them all; None
     when a stage's log is not here."""
-    metrics = _run_log_file(run, "metrics.json")
+    metrics = run_log_file(run, "metrics.json")
     episodes = json.loads(metrics.read_text()).get("episodes") if metrics else None
-    config = _run_log_file(run, "config.json")
+    config = run_log_file(run, "config.json")
     init_from = json.loads(config.read_text())["config"].get("init_from") if config else None
     if episodes is None or init_from is None:
         return episodes

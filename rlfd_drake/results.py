@@ -111,10 +111,16 @@ def episodes_path(json_path: str | Path) -> Path:
 def write_episodes(json_path: str | Path, table: dict) -> Path:
     """Writes a per-episode table (column name -> list) gzip-compressed beside its
     result: the per-episode columns are most of a result's bytes and repeat a lot, so
-    compressed they are about a fifth; ``mtime=0`` keeps a re-run's bytes the same."""
-    path = episodes_path(json_path)
+    compressed they are about a fifth."""
     text = json.dumps(_to_jsonable(table), separators=(",", ":"))
-    path.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))
+    return write_compressed(episodes_path(json_path), text.encode())
+
+
+def write_compressed(path: str | Path, data: bytes) -> Path:
+    """Writes ``data`` gzip-compressed to ``path``, with no time stamp in the header, so
+    the same data gives the same bytes (a re-run changes nothing in git)."""
+    path = Path(path)
+    path.write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
     return path
 
 

@@ -14,9 +14,9 @@ import gzip
 import shutil
 from pathlib import Path
 
-from rlfd_drake.results import check_result_name, results_dir
+from rlfd_drake.results import check_result_name, results_dir, write_compressed
 
-__all__ = ["keep_run_log", "read_episode_log"]
+__all__ = ["keep_run_log", "read_episode_log", "run_log_file", "run_log_folders"]
 
 #: Files of a run folder that are copied as they are; config.json is required.
 _COPIED = ("config.json", "metrics.json")
@@ -41,10 +41,22 @@ def keep_run_log(run_dir: str | Path, name: str | None = None, overwrite: bool =
     for file in _COPIED:
         if (run_dir / file).is_file():
             shutil.copyfile(run_dir / file, kept / file)
-    data = (run_dir / _EPISODES).read_bytes()
-    (kept / f"{_EPISODES}.gz").write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
+    write_compressed(kept / f"{_EPISODES}.gz", (run_dir / _EPISODES).read_bytes())
     (kept / _EPISODES).unlink(missing_ok=True)  # an uncompressed copy of an earlier keep
     return kept
+
+
+def run_log_folders(run_dir: str | Path) -> tuple[Path, Path]:
+    """Where a run's log is: its folder, then (a run of another machine) the copy
+    ``rlfd keep`` made in results/train_<name>/."""
+    run_dir = Path(run_dir)
+    return run_dir, results_dir() / f"train_{run_dir.name}"
+
+
+def run_log_file(run_dir: str | Path, file: str) -> Path | None:
+    """``file`` (config.json, metrics.json) of a run, from the first of
+    :func:`run_log_folders` that has it; None if neither does."""
+    return next((f / file for f in run_log_folders(run_dir) if (f / file).is_file()), None)
 
 
 def read_episode_log(folder: str | Path) -> str:

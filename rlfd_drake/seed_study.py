@@ -26,6 +26,7 @@ import numpy as np
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
 from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.run_log import run_log_folders
 from rlfd_drake.train import TrainConfig
 
 __all__ = ["ACTIONS", "SeedRun", "format_spread", "load_seed_run", "seed_study", "study_name"]
@@ -58,7 +59,7 @@ def load_seed_run(folder: str | Path) -> SeedRun:
     ``results/train_<folder name>/``; ValueError if neither holds config.json and
     metrics.json (a run still training has no metrics.json yet)."""
     folder = Path(folder)
-    for base in (folder, results_dir() / f"train_{folder.name}"):
+    for base in run_log_folders(folder):
         config, metrics = base / "config.json", base / "metrics.json"
         if config.is_file() and metrics.is_file():
             recorded = json.loads(config.read_text())
