@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from rlfd_drake.evaluate import EPISODE_GROUPINGS, result_from_json, success_by_group
+from rlfd_drake.evaluate import EPISODE_GROUPINGS, joined_evaluation, success_by_group
 from rlfd_drake.results import check_result_name, results_dir, utc_now, write_result
 
 __all__ = ["breakdown", "breakdown_markdown"]
@@ -26,7 +26,7 @@ def _load(path: str | Path) -> tuple[dict, dict]:
         raise ValueError(f"evaluations: no evaluation file at {str(path)!r}")
     try:
         record = json.loads(path.read_text())
-        result = result_from_json(path)
+        result = joined_evaluation(record, path)
         result["episode_table"]  # noqa: B018 (an evaluation has one)
     except (ValueError, KeyError, TypeError, OSError, EOFError) as error:
         raise ValueError(

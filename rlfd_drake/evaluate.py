@@ -908,7 +908,13 @@ def result_from_json(path: str | Path) -> dict:
     """The evaluation dict stored in a ``write_evaluation`` JSON file, with its
     per-episode table (kept in the JSON itself by evaluations stored before the table
     had a file of its own)."""
-    result = json.loads(Path(path).read_text())["data"]
+    return joined_evaluation(json.loads(Path(path).read_text()), path)
+
+
+def joined_evaluation(record: dict, path: str | Path) -> dict:
+    """The evaluation dict of an already read ``write_evaluation`` record stored at
+    ``path``, its per-episode table joined back from the file beside it."""
+    result = record["data"]
     if "episode_table" not in result and result.get("episode_table_file"):
         result["episode_table"] = read_episodes(path)
         del result["episode_table_file"]
