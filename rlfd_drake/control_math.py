@@ -404,3 +404,32 @@ def cartesian_impedance_torque(
     wrench = stiffness * pose_error + damping * velocity_error
     tau = J.T @ wrench + null_space_torque(J, tau_posture) - tau_gravity
     return np.clip(tau, -torque_limits, torque_limits)
+
+
+def integrate_residual(offset: np.ndarray, rate_action: np.ndarray, step: float) -> np.ndarray:
+    """One step of an incremental residual: ``clip(offset + step * clip(u, -1, 1), -1, 1)``.
+
+    The policy's action ``u`` is a rate (in residual units per second, times ``step =
+    rate_per_s * period_s``); the held offset it moves stays within the residual's range,
+    so the composer sees a residual in [-1, 1] like any other.
+    """
+    return np.clip(offset + step * np.clip(rate_action, -1.0, 1.0), -1.0, 1.0)
+
+
+def check_config_numbers(
+    config: object,
+    positive: tuple[str, ...] = (),
+    non_negative: tuple[str, ...] = (),
+    unit: str = "",
+) -> None:
+    """Raises ValueError naming the first of ``config``'s fields that is not a finite
+    positive (or, for ``non_negative``, >= 0) number; ``unit`` ends the message's
+    "a positive number" (e.g. " of seconds")."""
+    for name in positive:
+        value = getattr(config, name)
+        if not (np.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be a positive number{unit}, got {value}")
+    for name in non_negative:
+        value = getattr(config, name)
+        if not (np.isfinite(value) and value >= 0.0):
+            raise ValueError(f"{name} must be a non-negative number, got {value}")

@@ -37,6 +37,10 @@ from rlfd_drake.systems.impedance import (
 )
 from rlfd_drake.systems.observer import OBSERVATION_SIZE, Observer, ObserverConfig
 from rlfd_drake.systems.residual_filter import ResidualFilter, ResidualFilterConfig
+from rlfd_drake.systems.residual_integrator import (
+    ResidualIntegrator,
+    ResidualIntegratorConfig,
+)
 from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
 from rlfd_drake.systems.setpoint_triad import SetpointTriad
 from rlfd_drake.systems.velocity_command import VelocityCommandConfig, VelocityCommandSetpoint
@@ -57,9 +61,13 @@ RESIDUAL_SIZE = 6
 #: controller's own) sets the CartesianImpedanceConfig field of the same name on all
 #: three axes.
 _TASK_GAINS = ("rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m")
-#: Task fields that shape a residual added to the DMP (a filter, a push bound): the
+#: Task fields that shape a residual added to the DMP (a filter, a push bound, a rate): the
 #: hybrid and pure compositions have no such residual and refuse a task that sets them.
-_RESIDUAL_COMPOSITION_FIELDS = ("residual_filter_time_constant_s", "residual_max_push_m")
+_RESIDUAL_COMPOSITION_FIELDS = (
+    "residual_filter_time_constant_s",
+    "residual_max_push_m",
+    "residual_rate_per_s",
+)
 
 
 @dataclass
@@ -321,6 +329,21 @@ def BuildRlfdDiagram(
         )
         connect(observer.GetOutputPort("observation"), residual_policy.GetInputPort("observation"))
         residual_source = residual_policy.GetOutputPort("residual")
+    if task.residual_rate_per_s is not None:
+        # The action is a rate: the offset it integrates is the residual from here on,
+        # for the composer and for the observation (the policy must see where it is).
+        residual_integrator = builder.AddNamedSystem(
+            "residual_integrator",
+            ResidualIntegrator(
+                ResidualIntegratorConfig(
+                    rate_per_s=task.residual_rate_per_s,
+                    period_s=config.impedance.period_s,
+                    activation_time_s=activation,
+                )
+            ),
+        )
+        connect(residual_source, residual_integrator.get_input_port())
+        residual_source = residual_integrator.get_output_port()
     composer_residual = residual_source
     time_constant_s = task.residual_filter_time_constant_s
     if time_constant_s is not None:

@@ -248,6 +248,10 @@ class TaskSpec:
         residual_filter_time_constant_s: optional time constant of a first-order
             low-pass filter on the residual action (None = none: each 10 Hz action
             steps the set-point), s.
+        residual_rate_per_s: optional: the residual action is a rate, integrated into
+            the held offset the composer adds (systems/residual_integrator.py), in
+            residual units per second (None = the paper's residual: the action is the
+            offset). Residual composition only.
     """
 
     name: str
@@ -270,6 +274,7 @@ class TaskSpec:
     rotational_stiffness_Nm_per_rad: float | None = None
     translational_stiffness_N_per_m: float | None = None
     residual_filter_time_constant_s: float | None = None
+    residual_rate_per_s: float | None = None
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -458,6 +463,7 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.rotational_stiffness_Nm_per_rad, "rotational_stiffness_Nm_per_rad")
     _positive(task.translational_stiffness_N_per_m, "translational_stiffness_N_per_m")
     _positive(task.residual_filter_time_constant_s, "residual_filter_time_constant_s")
+    _positive(task.residual_rate_per_s, "residual_rate_per_s")
     if task.residual_activation_s > task.episode_time_s:
         raise ValueError(
             f"residual_activation_s = {task.residual_activation_s} is after the episode end "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from pydrake.systems.analysis import Simulator
 
 from rlfd_drake.episode import load_task_dmp
 from rlfd_drake.tasks import load_task
@@ -17,3 +18,25 @@ def peg_easy():
 def dmp(peg_easy):
     """The DMP fitted on peg_easy's shipped demonstration."""
     return load_task_dmp(peg_easy)
+
+
+@pytest.fixture
+def sample_output():
+    """A function (system, input value, until_s) -> [(time, output)] that simulates a
+    one-input, one-output system with its input fixed and samples its output at every
+    simulator step."""
+
+    def simulate(system, value, until_s):
+        simulator = Simulator(system)
+        context = simulator.get_mutable_context()
+        system.get_input_port().FixValue(context, value)
+        samples = []
+        simulator.set_monitor(
+            lambda root: samples.append(
+                (root.get_time(), system.get_output_port().Eval(root).copy())
+            )
+        )
+        simulator.AdvanceTo(until_s)
+        return samples
+
+    return simulate

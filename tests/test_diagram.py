@@ -267,6 +267,32 @@ def test_a_task_with_a_residual_filter_feeds_the_composer_through_it(peg):
         BuildRlfdDiagram(smooth, model, RlfdDiagramConfig(composition="hybrid"))
 
 
+def test_a_task_with_a_residual_rate_integrates_the_action(peg):
+    """With ``residual_rate_per_s`` the action is a rate: the composer adds the offset it
+    integrated, and the observer's residual is that offset (where the policy has moved
+    the set-point), not the action; only the residual composition can have it."""
+    task, model, X_WP_start = peg
+    incremental = dataclasses.replace(task, residual_rate_per_s=2.0)
+    rlfd = BuildRlfdDiagram(incremental, model, RlfdDiagramConfig(residual_activation_s=0.0))
+    assert rlfd.diagram.GetSubsystemByName("residual_integrator").config.rate_per_s == 2.0
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.array([0.5, 0, 0, 0, 0, 0]))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.AdvanceTo(0.2)
+    offset = (
+        rlfd.diagram.GetOutputPort("X_WE_desired").Eval(context)[0]
+        - rlfd.diagram.GetOutputPort("X_WE_base").Eval(context)[0]
+    )
+    max_translation_m, _ = RlfdDiagramConfig().residual_bounds(task)
+    # 0.5 * 2 per s for 0.2 s = 0.2 of the range (one 2 ms update may lag).
+    assert offset == pytest.approx(0.2 * max_translation_m, rel=0.02)
+    observed = rlfd.diagram.GetOutputPort("observation").Eval(context)[20]
+    assert observed == pytest.approx(offset / max_translation_m, rel=1e-9)
+    with pytest.raises(ValueError, match="residual_rate_per_s = 2.0"):
+        BuildRlfdDiagram(incremental, model, RlfdDiagramConfig(composition="pure"))
+
+
 def test_a_task_with_a_push_bound_gives_it_to_the_composer(peg):
     """``residual_max_push_m`` reaches the composer: a full downward residual leaves the
     set-point's height alone, a sideways one moves it; other compositions refuse it."""

@@ -6,24 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from pydrake.systems.analysis import Simulator
 
 from rlfd_drake.control_math import low_pass_gain
 from rlfd_drake.systems.residual_filter import ResidualFilter, ResidualFilterConfig
-
-
-def _simulate(config: ResidualFilterConfig, residual: np.ndarray, until_s: float):
-    """The filtered residual sampled at every update up to ``until_s``."""
-    system = ResidualFilter(config)
-    simulator = Simulator(system)
-    context = simulator.get_mutable_context()
-    system.get_input_port().FixValue(context, residual)
-    samples = []
-    simulator.set_monitor(
-        lambda root: samples.append((root.get_time(), system.get_output_port().Eval(root).copy()))
-    )
-    simulator.AdvanceTo(until_s)
-    return samples
 
 
 def test_low_pass_gain_is_the_exact_step_of_the_continuous_filter():
@@ -31,13 +16,13 @@ def test_low_pass_gain_is_the_exact_step_of_the_continuous_filter():
     assert low_pass_gain(1e-9, 1.0) == pytest.approx(1e-9, rel=1e-6)  # no cancellation
 
 
-def test_step_response_follows_one_minus_exp():
+def test_step_response_follows_one_minus_exp(sample_output):
     """A held step of 1 reaches 1 - exp(-t / tau) after activation; the clipped 3 stays
     at 1, the composer's limit, and the negative step mirrors it."""
     tau, activation = 0.1, 0.5
     config = ResidualFilterConfig(time_constant_s=tau, period_s=0.002, activation_time_s=activation)
     step = np.array([1.0, -1.0, 3.0, 0.5, 0.0, -0.25])
-    samples = _simulate(config, step, activation + 0.3)
+    samples = sample_output(ResidualFilter(config), step, activation + 0.3)
     for t, y in samples:
         if t < activation - 1e-9:
             assert np.all(y == 0.0), t
@@ -49,10 +34,10 @@ def test_step_response_follows_one_minus_exp():
     assert 0.94 < y_end[0] < 0.96  # about 3 tau
 
 
-def test_non_finite_residual_is_refused():
+def test_non_finite_residual_is_refused(sample_output):
     config = ResidualFilterConfig(activation_time_s=0.0)
     with pytest.raises(RuntimeError, match="non-finite value on port 'residual'"):
-        _simulate(config, np.array([0.0, np.nan, 0.0, 0.0, 0.0, 0.0]), 0.01)
+        sample_output(ResidualFilter(config), np.array([0.0, np.nan, 0.0, 0.0, 0.0, 0.0]), 0.01)
 
 
 @pytest.mark.parametrize(

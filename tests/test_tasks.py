@@ -189,10 +189,11 @@ def test_fixture_error():
 
 
 @pytest.mark.parametrize(
-    "field", ["rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m"]
+    "field",
+    ["rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m", "residual_rate_per_s"],
 )
 @pytest.mark.parametrize("value", [0.0, -20.0, float("nan"), float("inf")])
-def test_bad_controller_stiffness(tmp_path, field, value):
+def test_bad_positive_task_field(tmp_path, field, value):
     path = _write_variant(tmp_path, lambda d: d.update({field: value}))
     message = "must be positive" if math.isfinite(value) else "expected a finite number"
     with pytest.raises(ValueError, match=rf"{field}.*{message}"):

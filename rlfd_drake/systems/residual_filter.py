@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 
-from rlfd_drake.control_math import low_pass_gain
+from rlfd_drake.control_math import check_config_numbers, low_pass_gain
 
 
 @dataclass(frozen=True)
@@ -53,14 +53,12 @@ class ResidualFilter(LeafSystem):
 
     def __init__(self, config: ResidualFilterConfig = ResidualFilterConfig()):  # noqa: B008
         super().__init__()
-        for name in ("time_constant_s", "period_s"):
-            value = getattr(config, name)
-            if not (np.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive number of seconds, got {value}")
-        if not (np.isfinite(config.activation_time_s) and config.activation_time_s >= 0.0):
-            raise ValueError(
-                f"activation_time_s must be a non-negative number, got {config.activation_time_s}"
-            )
+        check_config_numbers(
+            config,
+            positive=("time_constant_s", "period_s"),
+            non_negative=("activation_time_s",),
+            unit=" of seconds",
+        )
         self.config = config
         self._gain = low_pass_gain(config.period_s, config.time_constant_s)
         self._residual_port = self.DeclareVectorInputPort("residual", 6)
