@@ -228,6 +228,17 @@ def test_soft_wrist_variants_change_only_the_stiffness():
         assert evaluation_size(variant) == evaluation_size(shipped)
 
 
+def test_incremental_variants_change_only_the_residual_rate():
+    """Each incremental variant is its shipped task whose residual action is a rate:
+    same part, fixture, starts, errors and bounds (so evaluations share the starts)."""
+    for name in ("peg", "gear"):
+        shipped = load_task(name, check_demo=False)
+        variant = load_task(tasks_dir() / "variants" / f"{name}_incremental.yaml")
+        assert shipped.residual_rate_per_s is None
+        assert variant.residual_rate_per_s == 2.0
+        assert dataclasses.replace(variant, name=name, residual_rate_per_s=None) == shipped
+
+
 def test_every_variant_loads_and_is_named_by_its_file():
     """Evaluations of a variant given by path are named by its file stem (``rlfd
     evaluate``, ``rlfd reproduce``): each variant's name must be that stem, and each
