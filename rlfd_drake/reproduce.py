@@ -17,7 +17,8 @@ insertion times), 6 (transfer between gear and RJ-45), ``forces`` (peak contact
 forces of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and
 ``wrist`` / ``forces_wrist`` (Table IV's DMP and SAC rows on the soft-wrist task
 variants), ``wrist_smooth`` / ``forces_wrist_smooth`` (the same with a low-passed
-residual); 5 and the force tables reuse the other tables' evaluations. Rows of
+residual), ``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the
+variants whose residual action is a rate); 5 and the force tables reuse the other tables' evaluations. Rows of
 deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's transfer
 runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders and
 the commands); a missing one is listed as "not run" with the command that trains it,
@@ -215,6 +216,23 @@ RUNS["rlfd_ppo_std2_tt_1400"] = {
         algo="ppo",
     )
     for task in ("peg", "gear")
+}
+# The same recipe with an incremental residual (the action is a rate integrated into the
+# offset, systems/residual_integrator.py): results/full_pose_study.md, section 9.
+_INCREMENTAL = {task: f"models/tasks/variants/{task}_incremental.yaml" for task in ("peg", "gear")}
+RUNS["rlfd_ppo_incremental"] = {
+    path: _run(f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo")
+    for path in _INCREMENTAL.values()
+}
+RUNS["rlfd_ppo_incremental_1400"] = {
+    path: _run(
+        f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_then700_s0",
+        path,
+        700,
+        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_incremental'][path][0]}/policy.zip",
+        "ppo",
+    )
+    for path in (_INCREMENTAL["gear"],)
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
@@ -609,13 +627,23 @@ TABLES["forces_full_pose"] = Table(
 
 
 def _add_variant_tables(
-    name: str, title: str, columns: dict[str, str], label: str, run_key: str, note: str
+    name: str,
+    title: str,
+    columns: dict[str, str],
+    trained: list[tuple[str, str]],
+    note: str,
+    dmp_label: str = "None / None (DMP alone), soft wrist",
 ) -> None:
-    """TABLES[name] (the DMP alone and the run's SAC policy, mean and sampled, on task
-    variants given by path) and TABLES["forces_" + name] (the same rows' forces)."""
+    """TABLES[name] (the DMP alone and each trained (label, run key) policy, mean and
+    sampled, on task variants given by path) and TABLES["forces_" + name] (the same
+    rows' forces)."""
     rows = [
-        Row("None / None (DMP alone), soft wrist", "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
-        *_mean_and_sampled(label, f"run:{run_key}", _PAPER_FULL_POSE_RLFD),
+        Row(dmp_label, "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
+        *(
+            row
+            for label, run_key in trained
+            for row in _mean_and_sampled(label, f"run:{run_key}", _PAPER_FULL_POSE_RLFD)
+        ),
     ]
     TABLES[name] = Table(title, columns, rows, note)
     TABLES[f"forces_{name}"] = Table(
@@ -632,8 +660,7 @@ _add_variant_tables(
     "wrist",
     "Table IV with a soft wrist: full pose at 20 N m/rad of rotational stiffness",
     _SOFT_WRIST,
-    "SAC / SAC (rLfD), 4 updates per step, soft wrist",
-    "rlfd_gs4_soft_wrist",
+    [("SAC / SAC (rLfD), 4 updates per step, soft wrist", "rlfd_gs4_soft_wrist")],
     "The shipped tasks with the controller's rotational stiffness at 20 N m/rad instead "
     "of 150 (models/tasks/variants/*_soft_wrist.yaml; franka_ros's Cartesian impedance "
     "example offers 0-30 N m/rad). The paper's columns are its stiffness-unstated "
@@ -643,12 +670,27 @@ _add_variant_tables(
     "wrist_smooth",
     "Table IV with a soft wrist and a low-passed residual",
     _SOFT_WRIST_SMOOTH,
-    "SAC / SAC (rLfD), soft wrist, low-passed residual",
-    "rlfd_gs4_soft_wrist_smooth",
+    [("SAC / SAC (rLfD), soft wrist, low-passed residual", "rlfd_gs4_soft_wrist_smooth")],
     "The soft-wrist variants (20 N m/rad) with the residual low-passed (0.1 s) and, on peg "
     "and gear, 2 deg of rotation per residual unit instead of 5 "
     "(models/tasks/variants/*_soft_wrist_smooth*.yaml). The paper's columns are its "
     "physical robot, as in Table IV.",
+)
+
+_add_variant_tables(
+    "incremental",
+    "Table IV with an incremental residual: the action is a rate, integrated into the offset",
+    _INCREMENTAL,
+    [
+        ("PPO / PPO (rLfD), incremental, 700 episodes", "rlfd_ppo_incremental"),
+        ("PPO / PPO (rLfD), incremental, 1,400 episodes", "rlfd_ppo_incremental_1400"),
+    ],
+    "The shipped tasks whose residual action is a rate (residual_rate_per_s = 2: an "
+    "action of 1 moves the offset by the whole 1 cm / 5 deg range in 0.5 s; "
+    "models/tasks/variants/*_incremental.yaml), trained with section 8's PPO recipe "
+    "(results/full_pose_study.md). The paper's columns are its physical robot, as in "
+    "Table IV.",
+    dmp_label="None / None (DMP alone)",
 )
 
 TABLES["6_wrist_smooth"] = Table(
