@@ -231,12 +231,13 @@ def test_soft_wrist_variants_change_only_the_stiffness():
 def test_incremental_variants_change_only_the_residual_rate():
     """Each incremental variant is its shipped task whose residual action is a rate:
     same part, fixture, starts, errors and bounds (so evaluations share the starts)."""
-    for name in ("peg", "gear"):
-        shipped = load_task(name, check_demo=False)
-        variant = load_task(tasks_dir() / "variants" / f"{name}_incremental.yaml")
+    variants = tasks_dir() / "variants"
+    for shipped_name_or_path in ("peg", "gear", variants / "rj45_slow_insert.yaml"):
+        shipped = load_task(shipped_name_or_path, check_demo=False)
+        variant = load_task(variants / f"{shipped.name}_incremental.yaml")
         assert shipped.residual_rate_per_s is None
         assert variant.residual_rate_per_s == 2.0
-        assert dataclasses.replace(variant, name=name, residual_rate_per_s=None) == shipped
+        assert dataclasses.replace(variant, name=shipped.name, residual_rate_per_s=None) == shipped
 
 
 def test_every_variant_loads_and_is_named_by_its_file():
