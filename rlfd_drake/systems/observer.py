@@ -90,7 +90,8 @@ class Observer(LeafSystem):
     15:18  wrist force / force_scale_N, same convention
     18     DMP phase (1 -> 0)
     19     time / episode_time_s
-    20:26  the residual action input (last held action)
+    20:26  the residual input: the last held action (with an incremental residual,
+           ``residual_rate_per_s``, the offset its integrator holds)
     ====== ====================================================================
 
     ``reward`` (1): sparse ``1[|p_WP - p_WGoal_true| <= kappa_m]``.
