@@ -13,15 +13,15 @@ writes ``results/table_<n>.md`` and ``results/table_<n>.json`` with the paper's
 numbers and ours.
 
 Tables: 1, 2, 3 (simulated pegs), 4 (full pose: peg, gear, RJ-45), 5 (Table IV's
-insertion times), 6 (transfer between gear and RJ-45), ``forces`` (peak contact
-forces of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and
-``wrist`` / ``forces_wrist`` (Table IV's DMP and SAC rows on the soft-wrist task
-variants), ``wrist_smooth`` / ``forces_wrist_smooth`` (the same with a low-passed
-residual), ``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the
-variants whose residual action is a rate); 5 and the force tables reuse the other tables' evaluations. Rows of
-deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's transfer
-runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders and
-the commands); a missing one is listed as "not run" with the command that trains it,
+insertion times), 6 (transfer between gear and RJ-45), ``forces`` (peak contact forces
+of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`` /
+``forces_wrist`` (Table IV's DMP and SAC rows on the soft-wrist task variants),
+``wrist_smooth`` / ``forces_wrist_smooth`` (the same with a low-passed residual),
+``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the variants whose
+residual action is a rate); 5 and the force tables reuse the other tables' evaluations.
+Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
+transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
+and the commands); a missing one is listed as "not run" with the command that trains it,
 since each takes 5-45 minutes on 2 cores.
 
 Budgets: ``quick`` trains each episodic baseline for 100 episodes and evaluates 40
