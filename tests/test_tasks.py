@@ -240,6 +240,18 @@ def test_incremental_variants_change_only_the_residual_rate():
         assert dataclasses.replace(variant, name=shipped.name, residual_rate_per_s=None) == shipped
 
 
+def test_incremental_nopush_variants_change_only_the_push_bound():
+    """peg's and gear's no-push incremental variants are their incremental variants whose
+    residual may not push down (the DMP does all the pressing)."""
+    variants = tasks_dir() / "variants"
+    for name in ("peg_incremental", "gear_incremental"):
+        incremental = load_task(variants / f"{name}.yaml", check_demo=False)
+        nopush = load_task(variants / f"{name}_nopush.yaml", check_demo=False)
+        assert incremental.residual_max_push_m is None
+        assert nopush.residual_max_push_m == 0.0
+        assert dataclasses.replace(nopush, name=name, residual_max_push_m=None) == incremental
+
+
 def test_every_variant_loads_and_is_named_by_its_file():
     """Evaluations of a variant given by path are named by its file stem (``rlfd
     evaluate``, ``rlfd reproduce``): each variant's name must be that stem, and each
