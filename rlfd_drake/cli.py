@@ -39,6 +39,9 @@ def _cmd_tasks(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from rlfd_drake.results import write_result
 
+    if args.tasks and args.what != "diagram":
+        raise ValueError(f"--tasks: only the diagram benchmark takes tasks, not {args.what!r}")
+    name = f"bench_{args.what}"
     if args.what == "sim":
         from rlfd_drake.bench import sim
 
@@ -52,11 +55,17 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         data = dmp.run(repeats=args.repeats)
     elif args.what == "diagram":
         from rlfd_drake.bench import diagram
+        from rlfd_drake.tasks import load_task
 
-        data = diagram.run(repeats=args.repeats)
+        if args.tasks:
+            # A chosen set of tasks is its own record: bench_diagram.json keeps all tasks'.
+            name += "_" + "_vs_".join(load_task(task).name for task in args.tasks)
+            data = diagram.run(repeats=args.repeats, tasks=args.tasks, profile_task=args.tasks[-1])
+        else:
+            data = diagram.run(repeats=args.repeats)
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
-    path = write_result(f"bench_{args.what}", data)
+    path = write_result(name, data)
     if args.json:
         _print_json(data)
     else:
@@ -552,6 +561,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--study",
         action="store_true",
         help="sim only: also the time-step stability study (its own results file)",
+    )
+    bench.add_argument(
+        "--tasks",
+        nargs="+",
+        help="diagram only: these task names or task YAML paths (variants), side by side "
+        "in one run, written to results/bench_diagram_<A>_vs_<B>....json; the last is "
+        "profiled (default: every shipped task, results/bench_diagram.json)",
     )
     bench.set_defaults(func=_cmd_bench)
 

@@ -1,5 +1,7 @@
 """The diagram benchmark's replays: the plant alone and the Python-floor probes."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.systems.framework import DiagramBuilder
@@ -39,3 +41,22 @@ def test_probes_run_at_the_rates_of_the_systems_they_stand_for(recorded):
     assert period(hold) == pytest.approx(period(rlfd.extrapolator))
     assert period(controller) == pytest.approx(period(rlfd.controller))
     assert period(observer) == pytest.approx(rlfd.observer.config.force_metrics_period_s)
+
+
+def test_tasks_must_be_distinct_and_are_checked_before_any_run():
+    with pytest.raises(ValueError, match=r"tasks: expected distinct tasks, got \['peg', 'peg'\]"):
+        bench.run(repeats=1, tasks=["peg", "peg"])
+    with pytest.raises(ValueError, match="tasks: expected distinct tasks"):
+        bench.run(repeats=1, tasks=[])
+
+
+def test_zero_rate_incremental_episode_is_its_shipped_tasks_episode():
+    """The benchmark runs an incremental task on a zero rate: the same episode as its
+    shipped task's, so the difference in wall time is the integrator's cost."""
+    task = load_task("peg_easy")
+    outcomes = []
+    for spec in (task, dataclasses.replace(task, residual_rate_per_s=2.0)):
+        rlfd, X_WP_start = bench._build(spec)
+        outcomes.append(bench._time_full(rlfd, X_WP_start)[1])
+    assert outcomes[0]["success"]
+    assert outcomes[1] == outcomes[0]

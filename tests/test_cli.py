@@ -180,3 +180,8 @@ def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     assert main(["plot", stored[0], "--out", str(tmp_path / "x.svg")]) == 2
     assert "--out must name a .png file, got" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
+    assert main(["bench", "sim", "--tasks", "peg"]) == 2
+    assert "--tasks: only the diagram benchmark takes tasks, not 'sim'" in capsys.readouterr().err

@@ -28,6 +28,7 @@ import pstats
 import statistics
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -52,6 +53,8 @@ _CALLBACKS = {
     "extrapolator": ("extrapolator.py", ("_update", "_calc_X", "_calc_V")),
     "composer": ("composer.py", ("_calc_X", "_calc_V")),
     "controller": ("impedance.py", ("_update",)),
+    # Only in tasks with an incremental residual (residual_rate_per_s).
+    "integrator": ("residual_integrator.py", ("_update",)),
     "observer": (
         "observer.py",
         (
@@ -173,7 +176,7 @@ def _time_replay(
     return wall, scene.plant.GetPositions(plant_context, scene.panda).copy()
 
 
-def profile_episode(task_name: str = "peg", top: int = 12) -> dict:
+def profile_episode(task_name: str | Path = "peg", top: int = 12) -> dict:
     """cProfile of one full episode: where the time goes.
 
     Returns ``{"task", "profiled_wall_s", "cpp_plant_and_framework_s",
@@ -185,6 +188,7 @@ def profile_episode(task_name: str = "peg", top: int = 12) -> dict:
     upstream outputs it pulls (the controller's update evaluates the composer's and
     the extrapolator's outputs), and profiling inflates Python time about twofold:
     quote the wall-clock ``overhead_fraction`` of :func:`run` for the split.
+    ``task_name`` is a task name or a task YAML path (a variant).
     """
     task = load_task(task_name)
     rlfd, X_WP_start = _build(task)
@@ -211,7 +215,7 @@ def profile_episode(task_name: str = "peg", top: int = 12) -> dict:
         for (path, line, func), v in ranked
     ]
     return {
-        "task": task_name,
+        "task": task.name,
         "profiled_wall_s": round(wall, 3),
         "cpp_plant_and_framework_s": round(advance_self, 3),
         "python_callbacks_s": round(advance_cum - advance_self, 3),
@@ -220,8 +224,17 @@ def profile_episode(task_name: str = "peg", top: int = 12) -> dict:
     }
 
 
-def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "peg") -> dict:
+def run(
+    repeats: int = 3,
+    tasks: list[str | Path] | None = None,
+    profile_task: str | Path = "peg",
+) -> dict:
     """Real-time factors of a 10 s zero-residual episode from the demo start, per task.
+
+    ``tasks`` are task names or task YAML paths (variants; default: every shipped
+    task); results are keyed by the task's name. A task with an incremental residual
+    runs its integrator on a zero rate, so its episode is the same as its shipped
+    task's and the difference in wall time is the integrator's cost.
 
     Returns ``{task: {"real_time_factor", "plant_real_time_factor",
     "overhead_fraction", "full_wall_s", "plant_wall_s", "replay_max_q_error_rad",
@@ -237,9 +250,12 @@ def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "p
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     results: dict[str, dict] = {}
+    specs = [load_task(name) for name in (tasks if tasks is not None else list_tasks())]
+    names = [task.name for task in specs]
+    if not specs or len(set(names)) < len(names):
+        raise ValueError(f"tasks: expected distinct tasks, got {names}")
     with _one_core():
-        for name in tasks if tasks is not None else list_tasks():
-            task = load_task(name)
+        for task in specs:
             rlfd, X_WP_start = _build(task)
             times, torques, q0, q_end = _record_torques(rlfd, X_WP_start)
             full, plant, floor = [], [], []
@@ -255,7 +271,7 @@ def run(repeats: int = 3, tasks: list[str] | None = None, profile_task: str = "p
                 floor.append(wall)
             t_full, t_plant = statistics.median(full), statistics.median(plant)
             t_floor = statistics.median(floor)
-            results[name] = {
+            results[task.name] = {
                 "real_time_factor": EPISODE_S / t_full,
                 "plant_real_time_factor": EPISODE_S / t_plant,
                 "overhead_fraction": (t_full - t_plant) / t_plant,
