@@ -18,7 +18,8 @@ of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`
 ``forces_wrist`` (Table IV's DMP and SAC rows on the soft-wrist task variants),
 ``wrist_smooth`` / ``forces_wrist_smooth`` (the same with a low-passed residual),
 ``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the variants whose
-residual action is a rate); 5 and the force tables reuse the other tables' evaluations.
+residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush`` (the
+same whose residual may not push down); 5 and the force tables reuse the other tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -233,6 +234,25 @@ RUNS["rlfd_ppo_incremental_1400"] = {
         "ppo",
     )
     for path in (_INCREMENTAL["gear"],)
+}
+# The incremental variants whose residual may not push down (residual_max_push_m = 0):
+# the DMP does all the pressing. results/full_pose_study.md, section 10.
+_INCREMENTAL_NOPUSH = {
+    task: f"models/tasks/variants/{task}_incremental_nopush.yaml" for task in ("peg", "gear")
+}
+RUNS["rlfd_ppo_incremental_nopush"] = {
+    path: _run(f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo")
+    for path in _INCREMENTAL_NOPUSH.values()
+}
+RUNS["rlfd_ppo_incremental_nopush_1400"] = {
+    path: _run(
+        f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_then700_s0",
+        path,
+        700,
+        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_incremental_nopush'][path][0]}/policy.zip",
+        "ppo",
+    )
+    for path in (_INCREMENTAL_NOPUSH["gear"],)
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
@@ -690,6 +710,25 @@ _add_variant_tables(
     "models/tasks/variants/*_incremental.yaml), trained with section 8's PPO recipe "
     "(results/full_pose_study.md). The paper's columns are its physical robot, as in "
     "Table IV.",
+    dmp_label="None / None (DMP alone)",
+)
+
+_add_variant_tables(
+    "incremental_nopush",
+    "Table IV with an incremental residual that may not push down",
+    _INCREMENTAL_NOPUSH,
+    [
+        ("PPO / PPO (rLfD), incremental, no push, 700 episodes", "rlfd_ppo_incremental_nopush"),
+        (
+            "PPO / PPO (rLfD), incremental, no push, 1,400 episodes",
+            "rlfd_ppo_incremental_nopush_1400",
+        ),
+    ],
+    "The incremental variants (residual_rate_per_s = 2) whose residual offset may lift, "
+    "slide and turn the part but not move it below the DMP's path (residual_max_push_m = "
+    "0; models/tasks/variants/*_incremental_nopush.yaml), so that the DMP does all the "
+    "pressing; section 8's PPO recipe (results/full_pose_study.md). The paper's columns "
+    "are its physical robot, as in Table IV.",
     dmp_label="None / None (DMP alone)",
 )
 
