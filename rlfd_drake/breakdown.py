@@ -12,15 +12,17 @@ import json
 from pathlib import Path
 
 from rlfd_drake.evaluate import EPISODE_GROUPINGS, joined_evaluation, success_by_group
-from rlfd_drake.results import check_result_name, results_dir, utc_now, write_result
+from rlfd_drake.results import new_result_path, results_dir, utc_now, write_result
 
-__all__ = ["breakdown", "breakdown_markdown"]
+__all__ = ["breakdown", "breakdown_markdown", "evaluation_labels", "load_evaluation"]
 
 #: Failure kinds shown in a breakdown's cells, in this order (the others are summed).
 _SHOWN_FAILURES = ("force_limit", "on_entrance", "jammed")
 
 
-def _load(path: str | Path) -> tuple[dict, dict]:
+def load_evaluation(path: str | Path) -> tuple[dict, dict]:
+    """(the stored record, the evaluation with its episode table) of an evaluation JSON;
+    a ValueError names a missing file or one that is not an evaluation."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"evaluations: no evaluation file at {str(path)!r}")
@@ -33,6 +35,19 @@ def _load(path: str | Path) -> tuple[dict, dict]:
             f"evaluations: {str(path)!r} is not an evaluation JSON ({error})"
         ) from error
     return record, result
+
+
+def evaluation_labels(evaluations: list[str | Path], labels: list[str] | None) -> list[str]:
+    """One label per evaluation file (default: the file stems); a ValueError when there
+    is no file or the labels do not match them one to one."""
+    if not evaluations:
+        raise ValueError("evaluations: give at least one evaluation JSON file")
+    labels = list(labels) if labels else [Path(p).stem for p in evaluations]
+    if len(labels) != len(evaluations):
+        raise ValueError(
+            f"labels: one per evaluation file ({len(evaluations)}), got {len(labels)}: {labels}"
+        )
+    return labels
 
 
 def breakdown(
@@ -57,25 +72,16 @@ def breakdown(
             file, a bad grouping or edges, or evaluations of different tasks.
         FileExistsError: the result exists and ``overwrite`` is False.
     """
-    if not evaluations:
-        raise ValueError("evaluations: give at least one evaluation JSON file")
-    labels = list(labels) if labels else [Path(p).stem for p in evaluations]
-    if len(labels) != len(evaluations):
-        raise ValueError(
-            f"labels: one per evaluation file ({len(evaluations)}), got {len(labels)}: {labels}"
-        )
+    labels = evaluation_labels(evaluations, labels)
     if by not in EPISODE_GROUPINGS:
         raise ValueError(f"by must be one of {sorted(EPISODE_GROUPINGS)}, got {by!r}")
     if name is not None:
-        check_result_name(f"breakdown_{name}")
-        existing = results_dir() / f"breakdown_{name}.json"
-        if existing.exists() and not overwrite:
-            raise FileExistsError(f"{existing} exists; pass --overwrite or another --name")
+        new_result_path(f"breakdown_{name}", overwrite)
     _, unit, default_edges = EPISODE_GROUPINGS[by]
     edges = default_edges if edges is None else tuple(float(e) for e in edges)
     columns, tasks = [], set()
     for label, path in zip(labels, evaluations, strict=True):
-        record, result = _load(path)
+        record, result = load_evaluation(path)
         tasks.add(result.get("task"))
         columns.append(
             {

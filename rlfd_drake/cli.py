@@ -543,6 +543,26 @@ def _cmd_breakdown(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_stored_result_arguments(parser: argparse.ArgumentParser, prefix: str) -> None:
+    """The evaluations, --labels, --name and --overwrite of a command that regroups
+    stored evaluations."""
+    parser.add_argument("evaluations", nargs="+", help="evaluation JSON files of one task")
+    parser.add_argument("--labels", nargs="+", help="one label per evaluation file")
+    parser.add_argument("--name", required=True, help=f"writes results/{prefix}_<name>.{{json,md}}")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+
+
+def _cmd_paired_forces(args: argparse.Namespace) -> int:
+    from rlfd_drake.paired_forces import paired_forces, paired_forces_markdown
+
+    data = paired_forces(
+        args.baseline, args.evaluations, args.labels, name=args.name, overwrite=args.overwrite
+    )
+    print(paired_forces_markdown(data), end="")
+    print(f"wrote results/paired_forces_{args.name}.json and .md")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rlfd", description="Residual Learning from Demonstration on Drake."
@@ -936,7 +956,6 @@ def build_parser() -> argparse.ArgumentParser:
         "breakdown",
         help="stored evaluations side by side, grouped by the unseen fixture error",
     )
-    regroup.add_argument("evaluations", nargs="+", help="evaluation JSON files of one task")
     regroup.add_argument(
         "--by",
         choices=["fixture_rotation", "fixture_position"],
@@ -950,10 +969,20 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="group edges (default: 0 1 1.5 2 2.5 inf deg or 0 1 2 3 inf mm)",
     )
-    regroup.add_argument("--labels", nargs="+", help="one column label per file")
-    regroup.add_argument("--name", required=True, help="writes results/breakdown_<name>.{json,md}")
-    regroup.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    _add_stored_result_arguments(regroup, "breakdown")
     regroup.set_defaults(func=_cmd_breakdown)
+
+    paired = sub.add_parser(
+        "paired-forces",
+        help="stored evaluations' contact forces against a baseline's on the same starts",
+    )
+    paired.add_argument(
+        "--baseline",
+        required=True,
+        help="the evaluation compared against (e.g. the DMP alone), same task, starts and seed",
+    )
+    _add_stored_result_arguments(paired, "paired_forces")
+    paired.set_defaults(func=_cmd_paired_forces)
 
     view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
     view.add_argument("--task", default="peg_easy")

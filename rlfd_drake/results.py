@@ -74,6 +74,16 @@ def check_result_name(name: str) -> None:
         raise ValueError(f"result name must be a plain file stem, got {name!r}")
 
 
+def new_result_path(name: str, overwrite: bool = False) -> Path:
+    """``results/<name>.json``, checked before a measurement runs: a plain file stem,
+    and no existing result unless ``overwrite`` (FileExistsError names the way out)."""
+    check_result_name(name)
+    path = results_dir() / f"{name}.json"
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass --overwrite or another --name")
+    return path
+
+
 def write_result(
     name: str, data: dict, seed: int | None = None, command: str | None = None
 ) -> Path:

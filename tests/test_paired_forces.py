@@ -1,0 +1,90 @@
+"""Contact forces against a baseline on the same starts (rlfd paired-forces)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from rlfd_drake.cli import main
+from rlfd_drake.paired_forces import paired_forces, sign_test_p
+
+
+def _evaluation(task: str, peaks: list[float], offsets: list[float] | None = None) -> dict:
+    n = len(peaks)
+    return {
+        "task": task,
+        "episodes": n,
+        "success_rate": 0.5,
+        "episode_table": {
+            "position_offset_mm": offsets if offsets is not None else [float(i) for i in range(n)],
+            "rotation_offset_deg": [1.0] * n,
+            "fixture_error_mm": [0.5] * n,
+            "peak_force_n": peaks,
+            "peak_low_passed_force_n": [p / 2 for p in peaks],
+        },
+    }
+
+
+def _write(path, result: dict) -> str:
+    path.write_text(json.dumps({"command": "rlfd evaluate ...", "seed": 0, "data": result}))
+    return str(path)
+
+
+def test_sign_test_matches_the_binomial_tails():
+    # 10 of 10 above: 2 / 2^10.
+    assert sign_test_p(10, 0) == pytest.approx(2 / 1024)
+    # 8 : 2 -> 2 * (1 + 10 + 45) / 1024.
+    assert sign_test_p(8, 2) == pytest.approx(2 * 56 / 1024)
+    assert sign_test_p(2, 8) == sign_test_p(8, 2)
+    assert sign_test_p(5, 5) == 1.0 and sign_test_p(0, 0) == 1.0
+    with pytest.raises(ValueError, match="counts must be >= 0"):
+        sign_test_p(-1, 3)
+
+
+def test_paired_forces_compares_start_by_start(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    baseline = _write(tmp_path / "dmp.json", _evaluation("peg", [100.0] * 10))
+    # Above the baseline on 8 starts, below on 1, equal on 1.
+    peaks = [110.0] * 8 + [90.0, 100.0]
+    policy = _write(tmp_path / "policy.json", _evaluation("peg", peaks))
+    data = paired_forces(baseline, [policy], ["rLfD"], name="toy")
+    (column,) = data["columns"]
+    peak = column["peak"]
+    assert (peak["n_above"], peak["n_below"]) == (8, 1)
+    assert peak["mean_difference_n"] == pytest.approx(7.0)
+    assert peak["median_ratio"] == pytest.approx(1.1)
+    assert peak["sign_test_p"] == pytest.approx(2 * (1 + 9) / 2**9)
+    assert column["low_passed"]["mean_n"] == pytest.approx(53.5)
+    stored = json.loads((tmp_path / "results" / "paired_forces_toy.json").read_text())
+    assert stored["data"]["baseline"]["file"] == baseline
+    markdown = (tmp_path / "results" / "paired_forces_toy.md").read_text()
+    assert "| rLfD | 50.0 % | 107 / 100 | 1.10 | 8 / 1 |" in markdown
+    with pytest.raises(FileExistsError, match="pass --overwrite"):
+        paired_forces(baseline, [policy], name="toy")
+    assert math.isclose(
+        paired_forces(baseline, [policy], name="toy", overwrite=True)["columns"][0]["peak"][
+            "mean_n"
+        ],
+        107.0,
+    )
+
+
+def test_paired_forces_refuses_other_tasks_and_other_starts(tmp_path, capsys):
+    baseline = _write(tmp_path / "dmp.json", _evaluation("peg", [100.0] * 4))
+    gear = _write(tmp_path / "gear.json", _evaluation("gear", [100.0] * 4))
+    moved = _write(tmp_path / "moved.json", _evaluation("peg", [100.0] * 4, [0.0, 1.0, 2.0, 9.0]))
+    shorter = _write(tmp_path / "short.json", _evaluation("peg", [100.0] * 3))
+    with pytest.raises(ValueError, match="is of task 'gear', the baseline of 'peg'"):
+        paired_forces(baseline, [gear])
+    for other in (moved, shorter):
+        with pytest.raises(ValueError, match="has other starts than the baseline"):
+            paired_forces(baseline, [other])
+    with pytest.raises(ValueError, match="labels: one per evaluation file"):
+        paired_forces(baseline, [moved], ["a", "b"])
+    with pytest.raises(ValueError, match="give at least one evaluation"):
+        paired_forces(baseline, [])
+    args = ["paired-forces", "--baseline", str(tmp_path / "none.json"), gear, "--name", "x"]
+    assert main(args) == 2
+    assert "no evaluation file at" in capsys.readouterr().err
