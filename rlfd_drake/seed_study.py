@@ -72,19 +72,28 @@ def load_seed_run(folder: str | Path) -> SeedRun:
     )
 
 
+def _recipe_value(run: SeedRun, key: str, defaults: dict):
+    """The run's setting ``key`` as its recipe names it: a run saved before a setting
+    existed trained with its default, and a later stage's ``init_from`` names its own
+    seed's earlier run (``..._s1/policy.zip`` for seed 1), the same step of the recipe."""
+    value = run.config.get(key, defaults.get(key))
+    if key == "init_from" and isinstance(value, str):
+        value = re.sub(rf"_s{run.seed}(?=[/\\]|$)", "_s<seed>", value)
+    return value
+
+
 def _check_one_recipe(runs: list[SeedRun]) -> None:
     """ValueError unless the runs differ in their seed and nothing else."""
     seeds = [run.seed for run in runs]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"runs: each seed once, got seeds {seeds}")
-    # A run saved before a setting existed trained with its default.
     defaults = {field.name: field.default for field in fields(TrainConfig)}
     first = runs[0]
     for run in runs[1:]:
         for key in sorted(set(first.config) | set(run.config)):
             if key == "seed":
                 continue
-            mine, theirs = (r.config.get(key, defaults.get(key)) for r in (first, run))
+            mine, theirs = (_recipe_value(r, key, defaults) for r in (first, run))
             if mine != theirs:
                 raise ValueError(
                     f"runs {str(first.folder)!r} and {str(run.folder)!r} differ in {key}: "

@@ -106,6 +106,15 @@ def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, mon
         seed_study([a, d], ["peg_easy"])
     with pytest.raises(ValueError, match="each seed once"):
         seed_study([a, a], ["peg_easy"])
+    # A second stage from each seed's own first stage is one recipe; from one seed's is not.
+    stage2 = [
+        _run_folder(tmp_path, seed, init_from=f"runs/first_s{seed}/policy.zip") for seed in (4, 5)
+    ]
+    with pytest.raises(ValueError, match="no policy.zip to evaluate"):  # past the check
+        seed_study(stage2, ["peg_easy"])
+    shared = _run_folder(tmp_path, 6, init_from="runs/first_s4/policy.zip")
+    with pytest.raises(ValueError, match="differ in init_from"):
+        seed_study([stage2[0], shared], ["peg_easy"])
     with pytest.raises(ValueError, match="targets: task 'peg_hard' is not evaluated"):
         seed_study([a], ["peg_easy"], targets={"peg_hard": 55.0})
     with pytest.raises(ValueError, match=r"targets: peg_easy must be a success % in \[0, 100\]"):
