@@ -221,39 +221,36 @@ RUNS["rlfd_ppo_std2_tt_1400"] = {
 # The same recipe with an incremental residual (the action is a rate integrated into the
 # offset, systems/residual_integrator.py): results/full_pose_study.md, section 9.
 _INCREMENTAL = {task: f"models/tasks/variants/{task}_incremental.yaml" for task in ("peg", "gear")}
-RUNS["rlfd_ppo_incremental"] = {
-    path: _run(f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo")
-    for path in _INCREMENTAL.values()
-}
-RUNS["rlfd_ppo_incremental_1400"] = {
-    path: _run(
-        f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_then700_s0",
-        path,
-        700,
-        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_incremental'][path][0]}/policy.zip",
-        "ppo",
-    )
-    for path in (_INCREMENTAL["gear"],)
-}
+
+
+def _add_ppo_variant_runs(key: str, variants: dict[str, str], second_stage: str) -> None:
+    """RUNS[key]: section 8's PPO recipe (700 episodes, seed 0) on each variant path, and
+    RUNS[key + "_1400"]: 700 more from that policy on the ``second_stage`` task's."""
+    RUNS[key] = {
+        path: _run(
+            f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo"
+        )
+        for path in variants.values()
+    }
+    path = variants[second_stage]
+    RUNS[f"{key}_1400"] = {
+        path: _run(
+            f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_then700_s0",
+            path,
+            700,
+            f"{_PPO_STD2_FLAGS} --init-from {RUNS[key][path][0]}/policy.zip",
+            "ppo",
+        )
+    }
+
+
+_add_ppo_variant_runs("rlfd_ppo_incremental", _INCREMENTAL, second_stage="gear")
 # The incremental variants whose residual may not push down (residual_max_push_m = 0):
 # the DMP does all the pressing. results/full_pose_study.md, section 10.
 _INCREMENTAL_NOPUSH = {
     task: f"models/tasks/variants/{task}_incremental_nopush.yaml" for task in ("peg", "gear")
 }
-RUNS["rlfd_ppo_incremental_nopush"] = {
-    path: _run(f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo")
-    for path in _INCREMENTAL_NOPUSH.values()
-}
-RUNS["rlfd_ppo_incremental_nopush_1400"] = {
-    path: _run(
-        f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_then700_s0",
-        path,
-        700,
-        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_incremental_nopush'][path][0]}/policy.zip",
-        "ppo",
-    )
-    for path in (_INCREMENTAL_NOPUSH["gear"],)
-}
+_add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second_stage="gear")
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
