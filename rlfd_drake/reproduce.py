@@ -19,7 +19,9 @@ of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`
 ``wrist_smooth`` / ``forces_wrist_smooth`` (the same with a low-passed residual),
 ``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the variants whose
 residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush`` (the
-same whose residual may not push down); 5 and the force tables reuse the other tables' evaluations.
+same whose residual may not push down), ``incremental_push2mm`` /
+``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm); 5 and the
+force tables reuse the other tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -223,15 +225,19 @@ RUNS["rlfd_ppo_std2_tt_1400"] = {
 _INCREMENTAL = {task: f"models/tasks/variants/{task}_incremental.yaml" for task in ("peg", "gear")}
 
 
-def _add_ppo_variant_runs(key: str, variants: dict[str, str], second_stage: str) -> None:
+def _add_ppo_variant_runs(
+    key: str, variants: dict[str, str], second_stage: str | None = None
+) -> None:
     """RUNS[key]: section 8's PPO recipe (700 episodes, seed 0) on each variant path, and
-    RUNS[key + "_1400"]: 700 more from that policy on the ``second_stage`` task's."""
+    (with ``second_stage``) RUNS[key + "_1400"]: 700 more from that task's policy."""
     RUNS[key] = {
         path: _run(
             f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo"
         )
         for path in variants.values()
     }
+    if second_stage is None:
+        return
     path = variants[second_stage]
     RUNS[f"{key}_1400"] = {
         path: _run(
@@ -251,6 +257,10 @@ _INCREMENTAL_NOPUSH = {
     task: f"models/tasks/variants/{task}_incremental_nopush.yaml" for task in ("peg", "gear")
 }
 _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second_stage="gear")
+# Peg's incremental variant whose residual may push down at most 2 mm (4 N at the
+# controller's 2000 N/m). results/full_pose_study.md, section 11.
+_INCREMENTAL_PUSH2MM = {"peg": "models/tasks/variants/peg_incremental_push2mm.yaml"}
+_add_ppo_variant_runs("rlfd_ppo_incremental_push2mm", _INCREMENTAL_PUSH2MM)
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -726,6 +736,19 @@ _add_variant_tables(
     "0; models/tasks/variants/*_incremental_nopush.yaml), so that the DMP does all the "
     "pressing; section 8's PPO recipe (results/full_pose_study.md). The paper's columns "
     "are its physical robot, as in Table IV.",
+    dmp_label="None / None (DMP alone)",
+)
+
+_add_variant_tables(
+    "incremental_push2mm",
+    "Table IV with an incremental residual that may push down at most 2 mm (peg)",
+    _INCREMENTAL_PUSH2MM,
+    [("PPO / PPO (rLfD), incremental, push <= 2 mm, 700 episodes", "rlfd_ppo_incremental_push2mm")],
+    "Peg's incremental variant (residual_rate_per_s = 2) whose residual offset may move "
+    "the peg at most 2 mm below the DMP's path (residual_max_push_m = 0.002, at most 4 N "
+    "more pressing at 2000 N/m; models/tasks/variants/peg_incremental_push2mm.yaml); "
+    "section 8's PPO recipe (results/full_pose_study.md). The paper's column is its "
+    "physical robot, as in Table IV.",
     dmp_label="None / None (DMP alone)",
 )
 

@@ -240,16 +240,20 @@ def test_incremental_variants_change_only_the_residual_rate():
         assert dataclasses.replace(variant, name=shipped.name, residual_rate_per_s=None) == shipped
 
 
-def test_incremental_nopush_variants_change_only_the_push_bound():
-    """peg's and gear's no-push incremental variants are their incremental variants whose
-    residual may not push down (the DMP does all the pressing)."""
+def test_push_bounded_incremental_variants_change_only_the_push_bound():
+    """peg's and gear's no-push incremental variants (the DMP does all the pressing) and
+    peg's 2 mm one are their incremental variants with a bound on the residual's push."""
     variants = tasks_dir() / "variants"
-    for name in ("peg_incremental", "gear_incremental"):
+    for name, suffix, bound in (
+        ("peg_incremental", "nopush", 0.0),
+        ("gear_incremental", "nopush", 0.0),
+        ("peg_incremental", "push2mm", 0.002),
+    ):
         incremental = load_task(variants / f"{name}.yaml", check_demo=False)
-        nopush = load_task(variants / f"{name}_nopush.yaml", check_demo=False)
+        bounded = load_task(variants / f"{name}_{suffix}.yaml", check_demo=False)
         assert incremental.residual_max_push_m is None
-        assert nopush.residual_max_push_m == 0.0
-        assert dataclasses.replace(nopush, name=name, residual_max_push_m=None) == incremental
+        assert bounded.residual_max_push_m == bound
+        assert dataclasses.replace(bounded, name=name, residual_max_push_m=None) == incremental
 
 
 def test_every_variant_loads_and_is_named_by_its_file():
