@@ -14,6 +14,7 @@ Like :mod:`rlfd_drake.breakdown` it runs nothing: it reads the episode tables th
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -59,6 +60,36 @@ def _column(table: dict, key: str, path: str | Path) -> np.ndarray:
     if key not in table:
         raise ValueError(f"evaluations: {str(path)!r} has no episode column {key!r}")
     return np.asarray(table[key], dtype=float)
+
+
+def _recorded_packages(record: dict) -> dict | None:
+    """The package versions an evaluation was made with (None: not recorded, before
+    2026-12-02)."""
+    return (record.get("machine") or {}).get("packages")
+
+
+def package_note(data: dict) -> str:
+    """A sentence on whether the compared evaluations share their package versions: a
+    learned policy's force peaks move with them, so a ratio across environments mixes
+    the two."""
+    entries = [("baseline", data["baseline"])] + [(c["label"], c) for c in data["columns"]]
+    unrecorded = [label for label, entry in entries if entry.get("packages") is None]
+    versions = {json.dumps(e["packages"], sort_keys=True) for _, e in entries if e.get("packages")}
+    if not unrecorded and len(versions) == 1:
+        shared = entries[0][1]["packages"]
+        listed = ", ".join(f"{name} {version}" for name, version in shared.items())
+        return f"All evaluations were made with the same packages ({listed})."
+    problems = []
+    if unrecorded:
+        problems.append(f"no package versions recorded for: {', '.join(unrecorded)}")
+    if len(versions) > 1:
+        problems.append("the recorded package versions differ")
+    return (
+        f"Caution: {'; '.join(problems)}. The same policy and starts in another "
+        "environment kept their outcomes but not their force peaks "
+        "(results.RECORDED_PACKAGES), so these ratios may mix the policy's effect with "
+        "the environment's."
+    )
 
 
 def paired_forces(
@@ -110,6 +141,7 @@ def paired_forces(
                 "label": label,
                 "file": str(path),
                 "command": record.get("command"),
+                "packages": _recorded_packages(record),
                 "seed": record.get("seed"),
                 "success_rate": result.get("success_rate"),
                 **{
@@ -124,6 +156,7 @@ def paired_forces(
         "baseline": {
             "file": str(baseline),
             "command": base_record.get("command"),
+            "packages": _recorded_packages(base_record),
             "success_rate": base.get("success_rate"),
         },
         "columns": columns,
@@ -158,6 +191,8 @@ def paired_forces_markdown(data: dict) -> str:
         f"({100 * data['baseline']['success_rate']:.1f} %). Per start, the policy's peak "
         "against the baseline's; p is the two-sided sign test (ties dropped). Regrouped "
         "from the stored evaluations below; nothing was run.",
+        "",
+        package_note(data),
         "",
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),

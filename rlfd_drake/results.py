@@ -84,6 +84,37 @@ def new_result_path(name: str, overwrite: bool = False) -> Path:
     return path
 
 
+#: The installed distributions an episode's numbers depend on: the same code and seed in
+#: another environment (these versions, or the machine) gave the same outcomes but other
+#: contact-force peaks (the demo's rLfD mean peak: 213 N in the environment of
+#: 2026-11-30, 232 N in the one re-created on 2026-12-01).
+RECORDED_PACKAGES = ("drake", "torch", "stable-baselines3", "gymnasium", "numpy")
+
+
+def package_versions() -> dict[str, str | None]:
+    """{distribution: installed version, or None if it is not installed}."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions: dict[str, str | None] = {}
+    for package in RECORDED_PACKAGES:
+        try:
+            versions[package] = version(package)
+        except PackageNotFoundError:
+            versions[package] = None
+    return versions
+
+
+def cpu_model() -> str | None:
+    """The processor's model name (Linux), None where it cannot be read."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return None
+
+
 def write_result(
     name: str, data: dict, seed: int | None = None, command: str | None = None
 ) -> Path:
@@ -101,6 +132,8 @@ def write_result(
             "python": platform.python_version(),
             "processor": platform.machine(),
             "cores_used": 1,
+            "cpu": cpu_model(),
+            "packages": package_versions(),
         },
         "data": _to_jsonable(data),
     }

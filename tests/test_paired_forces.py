@@ -88,3 +88,41 @@ def test_paired_forces_refuses_other_tasks_and_other_starts(tmp_path, capsys):
     args = ["paired-forces", "--baseline", str(tmp_path / "none.json"), gear, "--name", "x"]
     assert main(args) == 2
     assert "no evaluation file at" in capsys.readouterr().err
+
+
+def test_paired_forces_says_whether_the_package_versions_match(tmp_path, monkeypatch):
+    """A policy's force peaks move with the installed versions: the note names
+    evaluations without recorded versions or with other ones."""
+    monkeypatch.chdir(tmp_path)
+
+    def write(name: str, packages: dict | None) -> str:
+        record = {"command": "rlfd evaluate ...", "seed": 0, "data": _evaluation("peg", [1.0])}
+        if packages is not None:
+            record["machine"] = {"packages": packages}
+        (tmp_path / name).write_text(json.dumps(record))
+        return str(tmp_path / name)
+
+    here = {"drake": "1.51.1", "torch": "2.13.0"}
+    baseline = write("dmp.json", here)
+    same = write("same.json", here)
+    other = write("other.json", {"drake": "1.50.0", "torch": "2.13.0"})
+    old = write("old.json", None)
+    paired_forces(baseline, [same], ["rLfD"], name="same")
+    markdown = (tmp_path / "results" / "paired_forces_same.md").read_text()
+    assert "same packages (drake 1.51.1, torch 2.13.0)" in markdown
+    assert "Caution" not in markdown
+    paired_forces(baseline, [other, old], ["other", "old"], name="mixed")
+    markdown = (tmp_path / "results" / "paired_forces_mixed.md").read_text()
+    assert "Caution: no package versions recorded for: old; the recorded package" in markdown
+
+
+def test_results_record_the_package_versions(tmp_path, monkeypatch):
+    from importlib.metadata import version
+
+    from rlfd_drake.results import RECORDED_PACKAGES, write_result
+
+    monkeypatch.chdir(tmp_path)
+    stored = json.loads(write_result("toy", {"x": 1}, seed=0).read_text())
+    packages = stored["machine"]["packages"]
+    assert set(packages) == set(RECORDED_PACKAGES)
+    assert packages["drake"] == version("drake") and packages["numpy"] == version("numpy")
