@@ -103,10 +103,11 @@ def paired_forces(
     on the same starts; with ``name``, writes ``results/paired_forces_<name>.{json,md}``.
 
     Returns:
-        {"task", "episodes", "baseline": {"file", "command", "success_rate"},
-        "columns": [{"label", "file", "command", "seed", "success_rate", "peak",
-        "low_passed"}]}, "peak" and "low_passed" as {"mean_n", "baseline_mean_n",
-        "mean_difference_n", "median_ratio", "n_above", "n_below", "sign_test_p"}.
+        {"task", "episodes", "baseline": {"file", "command", "packages", "success_rate"},
+        "columns": [{"label", "file", "command", "packages", "seed", "success_rate",
+        "peak", "low_passed"}]}, "peak" and "low_passed" as {"mean_n", "baseline_mean_n",
+        "mean_difference_n", "median_ratio", "n_above", "n_below", "sign_test_p"};
+        "packages" is the versions the evaluation recorded (None: not recorded).
 
     Raises:
         ValueError: no evaluation, labels not one per file, a file that is not an

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import gzip
 import json
 import platform
@@ -91,8 +92,10 @@ def new_result_path(name: str, overwrite: bool = False) -> Path:
 RECORDED_PACKAGES = ("drake", "torch", "stable-baselines3", "gymnasium", "numpy")
 
 
+@functools.cache  # the environment does not change within a process
 def package_versions() -> dict[str, str | None]:
-    """{distribution: installed version, or None if it is not installed}."""
+    """{distribution: installed version, or None if it is not installed}; callers get
+    one shared dict and must not change it."""
     from importlib.metadata import PackageNotFoundError, version
 
     versions: dict[str, str | None] = {}
@@ -104,6 +107,7 @@ def package_versions() -> dict[str, str | None]:
     return versions
 
 
+@functools.cache
 def cpu_model() -> str | None:
     """The processor's model name (Linux), None where it cannot be read."""
     try:
@@ -133,7 +137,7 @@ def write_result(
             "processor": platform.machine(),
             "cores_used": 1,
             "cpu": cpu_model(),
-            "packages": package_versions(),
+            "packages": dict(package_versions()),
         },
         "data": _to_jsonable(data),
     }
