@@ -339,6 +339,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         sac_target_entropy=args.sac_target_entropy,
         log_std_init=args.log_std_init,
         learning_rate=args.learning_rate,
+        ppo_sde_sample_steps=args.ppo_sde_sample_steps,
         sac_learning_starts=args.sac_learning_starts,
         sac_initial_ent_coef=args.sac_initial_ent_coef,
         sac_gradient_steps=args.sac_gradient_steps,
@@ -662,6 +663,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="SAC: entropy the tuning holds (default SB3's -6; +1 keeps a ~0.3 std jiggle)",
     )
     train.add_argument("--learning-rate", type=float, default=3e-4, help="optimiser step size")
+    train.add_argument(
+        "--ppo-sde-sample-steps",
+        type=int,
+        default=0,
+        help="PPO: state-dependent exploration (gSDE) redrawn every N steps; 0 = "
+        "independent noise per step",
+    )
     train.add_argument(
         "--sac-learning-starts",
         type=int,

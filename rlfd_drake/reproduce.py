@@ -20,8 +20,9 @@ of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`
 ``incremental`` / ``forces_incremental`` (the DMP and PPO rows on the variants whose
 residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush`` (the
 same whose residual may not push down), ``incremental_push2mm`` /
-``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm); 5 and the
-force tables reuse the other tables' evaluations.
+``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
+``6_wrist_smooth`` and ``6_incremental`` (Table VI between those variants of gear and
+RJ-45); 5 and the force tables reuse the other tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -261,6 +262,54 @@ _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second
 # controller's 2000 N/m). results/full_pose_study.md, section 11.
 _INCREMENTAL_PUSH2MM = {"peg": "models/tasks/variants/peg_incremental_push2mm.yaml"}
 _add_ppo_variant_runs("rlfd_ppo_incremental_push2mm", _INCREMENTAL_PUSH2MM)
+# Table VI with the incremental residual: section 8's PPO recipe (RJ-45 with its
+# contact-torque scale and force-limit penalty) between gear_incremental and
+# rj45_slow_insert_incremental, both whose action is a rate. results/full_pose_study.md,
+# section 12.
+_TRANSFER_INCREMENTAL = {
+    "gear": _INCREMENTAL["gear"],
+    "rj45": "models/tasks/variants/rj45_slow_insert_incremental.yaml",
+}
+
+
+def _ppo_std2_run(path: str, task: str, episodes: int, tag: str = "", init_from: str = ""):
+    """Section 8's PPO recipe for ``task`` ("gear" or "rj45") on the variant ``path``:
+    ``episodes`` episodes into runs/<variant>_ppo_std2_<recipe tag><tag>_e<episodes>_s0,
+    from ``init_from``'s policy where given."""
+    flags = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip()
+    if init_from:
+        flags += f" --init-from {init_from}/policy.zip"
+    folder = f"runs/{Path(path).stem}_ppo_std2_{_PPO_STD2_TAG[task]}{tag}_e{episodes}_s0"
+    return _run(folder, path, episodes, flags, "ppo")
+
+
+def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
+    """RUNS["ppo_full" + suffix] (700 episodes on each of ``variants``' gear and rj45),
+    ["ppo_source_as_is" + suffix], ["ppo_scratch_60" + suffix] and
+    ["ppo_from_source_60" + suffix]: Table VI's PPO rows between them."""
+    full = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
+    RUNS[f"ppo_full{suffix}"] = full
+    pairs = (("gear", "rj45"), ("rj45", "gear"))
+    RUNS[f"ppo_source_as_is{suffix}"] = {
+        variants[target]: full[variants[source]] for target, source in pairs
+    }
+    RUNS[f"ppo_scratch_60{suffix}"] = {
+        variants[target]: _ppo_std2_run(variants[target], target, 60, "_scratch")
+        for target, _ in pairs
+    }
+    RUNS[f"ppo_from_source_60{suffix}"] = {
+        variants[target]: _ppo_std2_run(
+            variants[target],
+            target,
+            60,
+            f"_from_{Path(variants[source]).stem}",
+            init_from=full[variants[source]][0],
+        )
+        for target, source in pairs
+    }
+
+
+_add_ppo_transfer_runs("_incremental", _TRANSFER_INCREMENTAL)
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -410,16 +459,17 @@ _SHIPPED_SAC = Row(
 )
 
 
-def _sac_transfer_rows(label: str, full_runs: str, suffix: str) -> list[Row]:
-    """Table VI's SAC rows (mean action and sampled) from the runs that
-    :func:`_add_sac_transfer_runs` named with ``suffix``."""
+def _transfer_rows(label: str, full_runs: str, suffix: str, algo: str = "sac") -> list[Row]:
+    """Table VI's rows (mean action and sampled) from the runs that
+    :func:`_add_sac_transfer_runs` (or, with ``algo="ppo"``, :func:`_add_ppo_transfer_runs`)
+    named with ``suffix``."""
     return [
         row
         for what, key, paper in (
             ("full training on the target", full_runs, (92.2, 70.6)),
-            ("source policy as is", f"sac_source_as_is{suffix}", (85.4, 54.5)),
-            ("60 episodes from scratch", f"sac_scratch_60{suffix}", (70.3, 59.1)),
-            ("60 episodes from the source", f"sac_from_source_60{suffix}", (92.0, 70.6)),
+            ("source policy as is", f"{algo}_source_as_is{suffix}", (85.4, 54.5)),
+            ("60 episodes from scratch", f"{algo}_scratch_60{suffix}", (70.3, 59.1)),
+            ("60 episodes from the source", f"{algo}_from_source_60{suffix}", (92.0, 70.6)),
         )
         for row in _mean_and_sampled(
             f"{label}: {what}", f"run:{key}", dict(zip(("gear", "rj45"), paper, strict=True))
@@ -588,7 +638,7 @@ TABLES: dict[str, Table] = {
             Row("source policy as is", "run:source_as_is", {"gear": 85.4, "rj45": 54.5}),
             Row("60 episodes from scratch", "run:scratch_60", {"gear": 70.3, "rj45": 59.1}),
             Row("60 episodes from the source", "run:from_source_60", {"gear": 92.0, "rj45": 70.6}),
-            *_sac_transfer_rows("SAC, 4 updates per step", "rlfd_gs4", ""),
+            *_transfer_rows("SAC, 4 updates per step", "rlfd_gs4", ""),
         ],
         "Source of gear = the RJ-45 policy and back. The paper's 60 episodes are 3 PPO "
         "updates; here PPO updates every 512 steps (about 10 gear or 35 RJ-45 episodes). "
@@ -757,7 +807,7 @@ TABLES["6_wrist_smooth"] = Table(
     {"gear": _SOFT_WRIST_SMOOTH["gear"], "rj45": _SOFT_WRIST_SMOOTH["rj45"]},
     [
         Row("DMP alone, soft wrist", "dmp", {"gear": 41.5, "rj45": 0.0}),
-        *_sac_transfer_rows(
+        *_transfer_rows(
             "SAC, soft wrist, low-passed", "rlfd_gs4_soft_wrist_smooth", "_soft_wrist_smooth"
         ),
     ],
@@ -768,6 +818,23 @@ TABLES["6_wrist_smooth"] = Table(
     "steps of the copied policy. A residual of 1 is 1 cm / 2 deg on gear and 3 mm / "
     "3 deg on RJ-45, so a copied policy's actions change size. The paper's columns are "
     "its physical robot.",
+)
+
+TABLES["6_incremental"] = Table(
+    "Table VI between the incremental variants of gear and RJ-45 (full-pose PPO)",
+    {"gear": _TRANSFER_INCREMENTAL["gear"], "rj45": _TRANSFER_INCREMENTAL["rj45"]},
+    [
+        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
+        *_transfer_rows("PPO, incremental", "ppo_full_incremental", "_incremental", algo="ppo"),
+    ],
+    "Table VI's PPO rows between models/tasks/variants/gear_incremental.yaml and "
+    "rj45_slow_insert_incremental.yaml, whose residual action is a rate "
+    "(residual_rate_per_s = 2), with section 8's PPO recipe (RJ-45 with its contact-torque "
+    "scale 0.05 N m and force-limit penalty 1; results/full_pose_study.md). Source of gear "
+    "= the RJ-45 policy and back; full training is 700 episodes; the fine-tunes start "
+    "from the source's networks with a new optimiser. A residual of 1 is 1 cm / 5 deg on "
+    "gear and 3 mm / 3 deg on RJ-45, so a copied policy's moves change size. The "
+    "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.

@@ -92,6 +92,13 @@ class TrainConfig:
             jiggle around the DMP rather than uniform noise over the residual's range.
         learning_rate: optimiser step size.
         ppo_n_steps: PPO rollout length per env between updates.
+        ppo_sde_sample_steps: PPO only: 0 = SB3's independent Gaussian noise on every
+            action; N > 0 = generalized state-dependent exploration (gSDE, Raffin et
+            al. 2022): the noise is a fixed random linear map of the policy's last
+            hidden layer, redrawn every N steps per env, so in a steady contact the
+            exploration holds one direction (with an incremental residual: a steady
+            drift, i.e. a search) instead of averaging out step to step. Its std per
+            axis is exp(log_std_init) times the norm of that 64-unit layer.
         sac_learning_starts: SAC steps before its first update, explored with the
             initial (zero-mean) policy (see ResidualSAC).
         sac_gradient_steps: SAC updates after each step of the ``envs`` envs (1 with
@@ -180,6 +187,7 @@ class TrainConfig:
     log_std_init: float = -1.5
     learning_rate: float = 3e-4
     ppo_n_steps: int = 256
+    ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
     sac_gradient_steps: int = 1
     sac_initial_ent_coef: float = 0.01
@@ -223,6 +231,17 @@ class TrainConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if int(self.ppo_sde_sample_steps) != self.ppo_sde_sample_steps or (
+            self.ppo_sde_sample_steps < 0
+        ):
+            raise ValueError(
+                f"ppo_sde_sample_steps must be an integer >= 0, got {self.ppo_sde_sample_steps}"
+            )
+        if self.ppo_sde_sample_steps and self.algo != "ppo":
+            raise ValueError(
+                f"ppo_sde_sample_steps={self.ppo_sde_sample_steps} needs algo 'ppo', got "
+                f"{self.algo!r}"
+            )
         if self.sac_learning_starts < 0:
             raise ValueError(f"sac_learning_starts must be >= 0, got {self.sac_learning_starts}")
         if self.eval_every_episodes < 0:
@@ -447,6 +466,8 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             n_epochs=10,
+            use_sde=config.ppo_sde_sample_steps > 0,
+            sde_sample_freq=config.ppo_sde_sample_steps or -1,
             gamma=DISCOUNT,
             policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **inputs),
             **common,

@@ -475,3 +475,34 @@ def test_the_sac_transfer_rows_fine_tune_the_other_tasks_policy(suffix, full, ta
         assert full_recipe.replace(" 300 ", " 60 ").replace(" 500 ", " 60 ") in scratch
     labels = [row.label for row in reproduce.TABLES[table].rows]
     assert f"{label}: 60 episodes from the source, sampled actions" in labels
+
+
+def test_the_incremental_ppo_transfer_rows_fine_tune_the_other_tasks_700_episode_policy():
+    """Table VI between the incremental variants: each 60-episode run keeps its target's
+    700-episode PPO recipe (RJ-45's torque scale and penalty included), the fine-tune
+    starts from the other task's full run, and the scratch run does not."""
+    runs = reproduce.RUNS
+    tasks = {
+        "gear": "models/tasks/variants/gear_incremental.yaml",
+        "rj45": "models/tasks/variants/rj45_slow_insert_incremental.yaml",
+    }
+    for target, source in (("gear", "rj45"), ("rj45", "gear")):
+        source_folder, _ = runs["ppo_full_incremental"][tasks[source]]
+        full_folder, full_command = runs["ppo_full_incremental"][tasks[target]]
+        assert "--episodes 700 " in full_command and "--algo ppo " in full_command
+        assert runs["ppo_source_as_is_incremental"][tasks[target]][0] == source_folder
+        recipe = full_command.split("--envs 2 ")[1].split(" --out")[0]
+        folder, command = runs["ppo_from_source_60_incremental"][tasks[target]]
+        assert f"--task {tasks[target]} " in command and "--episodes 60 " in command
+        assert f"{recipe} --init-from {source_folder}/policy.zip" in command
+        assert folder == full_folder.replace("_e700_", f"_from_{Path(tasks[source]).stem}_e60_")
+        scratch_folder, scratch = runs["ppo_scratch_60_incremental"][tasks[target]]
+        assert "--init-from" not in scratch and f"{recipe} --out {scratch_folder}" in scratch
+        assert scratch_folder == full_folder.replace("_e700_", "_scratch_e60_")
+    assert "--force-limit-penalty 1" in runs["ppo_full_incremental"][tasks["rj45"]][1]
+    # The gear full run is the incremental table's 700-episode row.
+    assert (
+        runs["ppo_full_incremental"][tasks["gear"]] == (runs["rlfd_ppo_incremental"][tasks["gear"]])
+    )
+    labels = [row.label for row in reproduce.TABLES["6_incremental"].rows]
+    assert "PPO, incremental: 60 episodes from the source, mean action" in labels

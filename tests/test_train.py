@@ -592,3 +592,42 @@ def test_timeout_terminal_makes_the_learner_treat_the_time_limit_as_terminal(tim
     assert buffer.timeouts[3, 0] == (0.0 if timeout_terminal else 1.0)
     assert not buffer.dones[:3].any()
     assert TrainConfig(timeout_terminal=True).timeout_terminal
+
+
+def test_ppo_state_dependent_exploration_holds_its_noise_until_redrawn():
+    """With ppo_sde_sample_steps the untrained residual is still zero, the noise is a
+    fixed function of the observation until SB3 redraws it (every N steps), and two
+    PPO updates train it; without it, one observation gets a new sample every time."""
+    config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, ppo_sde_sample_steps=4)
+    model = make_model(config, fast_venv(), None)
+    assert model.use_sde and model.sde_sample_freq == 4
+    obs = np.random.default_rng(0).normal(size=(1, 26)).astype(np.float32)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
+    first, second = (model.predict(obs, deterministic=False)[0] for _ in range(2))
+    np.testing.assert_array_equal(first, second)
+    assert np.all(np.abs(first) > 0.0)
+    model.policy.reset_noise()
+    assert not np.allclose(model.predict(obs, deterministic=False)[0], first)
+    before = _parameters(model)
+    model.learn(total_timesteps=32)
+    assert model._n_updates == 2 * model.n_epochs and _changed(before, model)
+    independent = make_model(TrainConfig(algo="ppo", envs=1), fast_venv(), None)
+    assert not independent.use_sde
+    samples = [independent.predict(obs, deterministic=False)[0] for _ in range(2)]
+    assert not np.allclose(*samples)
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"ppo_sde_sample_steps": -1}, "ppo_sde_sample_steps must be an integer >= 0, got -1"),
+        ({"ppo_sde_sample_steps": 2.5}, "ppo_sde_sample_steps must be an integer >= 0, got 2.5"),
+        (
+            {"ppo_sde_sample_steps": 8, "algo": "sac"},
+            "ppo_sde_sample_steps=8 needs algo 'ppo', got 'sac'",
+        ),
+    ],
+)
+def test_ppo_sde_sample_steps_is_validated(fields, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        TrainConfig(**fields)
