@@ -272,15 +272,28 @@ _TRANSFER_INCREMENTAL = {
 }
 
 
-def _ppo_std2_run(path: str, task: str, episodes: int, tag: str = "", init_from: str = ""):
+#: RJ-45's contact-torque scale: its networks read 0.05 N m of wrist torque as one unit.
+_RJ45_TORQUE_FLAG = "--contact-torque-nm 0.05"
+
+
+def _ppo_std2_run(
+    path: str, task: str, episodes: int, tag: str = "", source: tuple[str, str] | None = None
+):
     """Section 8's PPO recipe for ``task`` ("gear" or "rj45") on the variant ``path``:
-    ``episodes`` episodes into runs/<variant>_ppo_std2_<recipe tag><tag>_e<episodes>_s0,
-    from ``init_from``'s policy where given."""
-    flags = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip()
-    if init_from:
-        flags += f" --init-from {init_from}/policy.zip"
-    folder = f"runs/{Path(path).stem}_ppo_std2_{_PPO_STD2_TAG[task]}{tag}_e{episodes}_s0"
-    return _run(folder, path, episodes, flags, "ppo")
+    ``episodes`` episodes into runs/<variant>_ppo_std2_<recipe tag><tag>_e<episodes>_s0.
+    With ``source`` = (its task, its run folder) the run starts from that policy and
+    reads the observation as the source does (its torque scale is in the copied
+    networks; ``train.copy_policy_parameters`` refuses another)."""
+    flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
+    if source is not None:
+        source_task, source_folder = source
+        torque = _RJ45_TORQUE_FLAG if source_task == "rj45" else ""
+        flags = f"{flags.replace(_RJ45_TORQUE_FLAG, '')} {torque} --init-from "
+        flags += f"{source_folder}/policy.zip"
+        recipe_tag = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}[task]
+        recipe_tag = recipe_tag if source_task != task else _PPO_STD2_TAG[task]
+    folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
+    return _run(folder, path, episodes, " ".join(flags.split()), "ppo")
 
 
 def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
@@ -303,7 +316,7 @@ def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
             target,
             60,
             f"_from_{Path(variants[source]).stem}",
-            init_from=full[variants[source]][0],
+            source=(source, full[variants[source]][0]),
         )
         for target, source in pairs
     }

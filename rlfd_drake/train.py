@@ -53,12 +53,14 @@ from rlfd_drake.env import (
     check_reward_terms,
 )
 from rlfd_drake.observation_scaling import (
+    CONTACT_SCALES,
     CONTACT_TORQUE_PER_UNIT_NM,
     ScaledObservation,
     contact_scales,
 )
 from rlfd_drake.policies import load_sb3_model
 from rlfd_drake.results import format_json, invoked_command, utc_now
+from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
 
 ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
@@ -523,13 +525,25 @@ def copy_policy_parameters(source: BaseAlgorithm, target: BaseAlgorithm) -> None
     optimisers and the replay buffer start afresh.
 
     Raises:
-        ValueError: the two are different algorithms or their networks differ in shape
-            (e.g. another observation history or action size).
+        ValueError: the two are different algorithms, read their observation with
+            different fixed scales (``--scaled-observation``, ``--contact-torque-nm``:
+            the scales live in the networks' state, so copying them would silently
+            override this run's), or their networks differ in shape (e.g. another
+            observation history or action size).
     """
     if type(source.policy) is not type(target.policy):  # SAC and ResidualSAC share one
         raise ValueError(
             f"init_from is a {type(source).__name__} policy, this run trains "
             f"{type(target).__name__}"
+        )
+    source_scales, target_scales = (_observation_scales(m.policy) for m in (source, target))
+    if (source_scales is None) != (target_scales is None) or (
+        source_scales is not None and not torch.equal(source_scales, target_scales)
+    ):
+        raise ValueError(
+            f"init_from reads its observation {_describe_reading(source_scales)}, this run "
+            f"{_describe_reading(target_scales)}: train with the source's "
+            "--scaled-observation / --contact-torque-nm"
         )
     source_state = source.policy.state_dict()
     target_state = target.policy.state_dict()
@@ -544,6 +558,22 @@ def copy_policy_parameters(source: BaseAlgorithm, target: BaseAlgorithm) -> None
     if getattr(source, "log_ent_coef", None) is not None and target.log_ent_coef is not None:
         with torch.no_grad():
             target.log_ent_coef.copy_(source.log_ent_coef.detach())
+
+
+def _observation_scales(policy) -> torch.Tensor | None:
+    """The fixed input scales of ``policy``'s networks (``ScaledObservation``; SAC's
+    actor and critics each hold a copy, equal), None if it reads the observation as is."""
+    scales = [buffer for name, buffer in policy.named_buffers() if name.endswith(".scales")]
+    return scales[0] if scales else None
+
+
+def _describe_reading(scales: torch.Tensor | None) -> str:
+    """ "unscaled", or the wrist torque that ``scales`` map to one unit."""
+    if scales is None:
+        return "unscaled"
+    index = OBSERVATION_WRIST_TORQUE.start
+    per_unit = CONTACT_TORQUE_PER_UNIT_NM * CONTACT_SCALES[index] / float(scales[index])
+    return f"scaled, wrist torque {per_unit:g} N m per unit"
 
 
 def load_model(path: str | Path) -> BaseAlgorithm:

@@ -479,27 +479,34 @@ def test_the_sac_transfer_rows_fine_tune_the_other_tasks_policy(suffix, full, ta
 
 def test_the_incremental_ppo_transfer_rows_fine_tune_the_other_tasks_700_episode_policy():
     """Table VI between the incremental variants: each 60-episode run keeps its target's
-    700-episode PPO recipe (RJ-45's torque scale and penalty included), the fine-tune
-    starts from the other task's full run, and the scratch run does not."""
+    700-episode PPO recipe (RJ-45's force-limit penalty included); the fine-tune starts
+    from the other task's full run and reads the observation as that source does (its
+    torque scale is in the copied networks), the scratch run as its own full run."""
     runs = reproduce.RUNS
     tasks = {
         "gear": "models/tasks/variants/gear_incremental.yaml",
         "rj45": "models/tasks/variants/rj45_slow_insert_incremental.yaml",
     }
+    torque = "--contact-torque-nm 0.05"
+    assert torque in runs["ppo_full_incremental"][tasks["rj45"]][1]
+    assert torque not in runs["ppo_full_incremental"][tasks["gear"]][1]
     for target, source in (("gear", "rj45"), ("rj45", "gear")):
-        source_folder, _ = runs["ppo_full_incremental"][tasks[source]]
+        source_folder, source_command = runs["ppo_full_incremental"][tasks[source]]
         full_folder, full_command = runs["ppo_full_incremental"][tasks[target]]
         assert "--episodes 700 " in full_command and "--algo ppo " in full_command
         assert runs["ppo_source_as_is_incremental"][tasks[target]][0] == source_folder
         recipe = full_command.split("--envs 2 ")[1].split(" --out")[0]
         folder, command = runs["ppo_from_source_60_incremental"][tasks[target]]
         assert f"--task {tasks[target]} " in command and "--episodes 60 " in command
-        assert f"{recipe} --init-from {source_folder}/policy.zip" in command
-        assert folder == full_folder.replace("_e700_", f"_from_{Path(tasks[source]).stem}_e60_")
+        assert f"--init-from {source_folder}/policy.zip --out {folder}" in command
+        assert (torque in command) == (torque in source_command)
+        for flag in recipe.replace(torque, "").split("--")[1:]:
+            assert f"--{flag.strip()}" in command
+        assert folder.endswith(f"_from_{Path(tasks[source]).stem}_e60_s0")
         scratch_folder, scratch = runs["ppo_scratch_60_incremental"][tasks[target]]
         assert "--init-from" not in scratch and f"{recipe} --out {scratch_folder}" in scratch
         assert scratch_folder == full_folder.replace("_e700_", "_scratch_e60_")
-    assert "--force-limit-penalty 1" in runs["ppo_full_incremental"][tasks["rj45"]][1]
+    assert "--force-limit-penalty 1" in runs["ppo_from_source_60_incremental"][tasks["rj45"]][1]
     # The gear full run is the incremental table's 700-episode row.
     assert (
         runs["ppo_full_incremental"][tasks["gear"]] == (runs["rlfd_ppo_incremental"][tasks["gear"]])

@@ -631,3 +631,35 @@ def test_ppo_state_dependent_exploration_holds_its_noise_until_redrawn():
 def test_ppo_sde_sample_steps_is_validated(fields, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         TrainConfig(**fields)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_init_from_refuses_a_source_that_reads_the_observation_differently(algo):
+    """The fixed input scales are part of a network's state: a fine-tune from a policy
+    with other scales would silently run with the source's, not its own flags'. It is
+    refused with both readings named; equal scales copy, networks and scales alike."""
+    from rlfd_drake.train import copy_policy_parameters
+
+    def model(**fields):
+        return make_model(TrainConfig(algo=algo, envs=1, history=1, **fields), fast_venv(), None)
+
+    rj45_reading = model(scaled_observation=True, contact_torque_nm=0.05)
+    peg_reading = model(scaled_observation=True)
+    with pytest.raises(
+        ValueError,
+        match=re.escape(
+            "init_from reads its observation scaled, wrist torque 0.05 N m per unit, this run "
+            "scaled, wrist torque 1 N m per unit"
+        ),
+    ):
+        copy_policy_parameters(rj45_reading, peg_reading)
+    with pytest.raises(ValueError, match="reads its observation unscaled, this run scaled"):
+        copy_policy_parameters(model(), peg_reading)
+    with pytest.raises(ValueError, match="this run unscaled"):
+        copy_policy_parameters(peg_reading, model())
+    same = model(scaled_observation=True, contact_torque_nm=0.05)
+    copy_policy_parameters(rj45_reading, same)
+    for (name, a), b in zip(
+        rj45_reading.policy.state_dict().items(), same.policy.state_dict().values(), strict=True
+    ):
+        assert torch.equal(a, b), name
