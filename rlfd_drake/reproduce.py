@@ -845,7 +845,9 @@ TABLES["6_incremental"] = Table(
     "(residual_rate_per_s = 2), with section 8's PPO recipe (RJ-45 with its contact-torque "
     "scale 0.05 N m and force-limit penalty 1; results/full_pose_study.md). Source of gear "
     "= the RJ-45 policy and back; full training is 700 episodes; the fine-tunes start "
-    "from the source's networks with a new optimiser. A residual of 1 is 1 cm / 5 deg on "
+    "from the source's networks with a new optimiser and read the observation as the "
+    "source does (its torque scale is part of the copied networks). 60 episodes are 4-5 "
+    "PPO updates here (the paper: 3). A residual of 1 is 1 cm / 5 deg on "
     "gear and 3 mm / 3 deg on RJ-45, so a copied policy's moves change size. The "
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
