@@ -185,3 +185,22 @@ def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
 def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert main(["bench", "sim", "--tasks", "peg"]) == 2
     assert "--tasks: only the diagram benchmark takes tasks, not 'sim'" in capsys.readouterr().err
+
+
+def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
+    """`rlfd train`'s exploration flags land in the TrainConfig it trains, and a bad
+    one is a named error (exit 2), not a crash."""
+    import rlfd_drake.train as train_module
+
+    seen = {}
+
+    def record(config, out, **_):
+        seen["c"] = config
+        return {}
+
+    monkeypatch.setattr(train_module, "train", record)
+    flags = ["train", "--task", "peg_easy", "--algo", "ppo", "--log-std-init", "-4"]
+    assert main([*flags, "--ppo-sde-sample-steps", "20", "--out", "unused"]) == 0
+    assert seen["c"].ppo_sde_sample_steps == 20 and seen["c"].log_std_init == -4.0
+    assert main([*flags, "--ppo-sde-sample-steps", "-3", "--out", "unused"]) == 2
+    assert "ppo_sde_sample_steps must be an integer >= 0, got -3" in capsys.readouterr().err
