@@ -276,22 +276,26 @@ _TRANSFER_INCREMENTAL = {
 _RJ45_TORQUE_FLAG = "--contact-torque-nm 0.05"
 
 
+#: Section 8's recipe tag of a fine-tune that reads the observation as the other task's
+#: policy does: gear with RJ-45's torque scale, RJ-45 with gear's (the default).
+_PPO_STD2_TAG_OTHER_READING = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}
+
+
 def _ppo_std2_run(
-    path: str, task: str, episodes: int, tag: str = "", source: tuple[str, str] | None = None
+    path: str, task: str, episodes: int, tag: str = "", from_other_task: str | None = None
 ):
     """Section 8's PPO recipe for ``task`` ("gear" or "rj45") on the variant ``path``:
     ``episodes`` episodes into runs/<variant>_ppo_std2_<recipe tag><tag>_e<episodes>_s0.
-    With ``source`` = (its task, its run folder) the run starts from that policy and
-    reads the observation as the source does (its torque scale is in the copied
-    networks; ``train.copy_policy_parameters`` refuses another)."""
+    With ``from_other_task`` (the run folder of the other task's policy) the run starts
+    from that policy and reads the observation as it does (its torque scale is in the
+    copied networks; ``train.copy_policy_parameters`` refuses another)."""
     flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
-    if source is not None:
-        source_task, source_folder = source
-        torque = _RJ45_TORQUE_FLAG if source_task == "rj45" else ""
-        flags = f"{flags.replace(_RJ45_TORQUE_FLAG, '')} {torque} --init-from "
-        flags += f"{source_folder}/policy.zip"
-        recipe_tag = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}[task]
-        recipe_tag = recipe_tag if source_task != task else _PPO_STD2_TAG[task]
+    if from_other_task is not None:
+        flags = flags.replace(_RJ45_TORQUE_FLAG, "")
+        if task == "gear":
+            flags += f" {_RJ45_TORQUE_FLAG}"
+        flags += f" --init-from {from_other_task}/policy.zip"
+        recipe_tag = _PPO_STD2_TAG_OTHER_READING[task]
     folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
     return _run(folder, path, episodes, " ".join(flags.split()), "ppo")
 
@@ -316,7 +320,7 @@ def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
             target,
             60,
             f"_from_{Path(variants[source]).stem}",
-            source=(source, full[variants[source]][0]),
+            from_other_task=full[variants[source]][0],
         )
         for target, source in pairs
     }
