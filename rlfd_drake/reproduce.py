@@ -194,22 +194,43 @@ RUNS["rlfd_gs4"] = {
 # one and the episode's time limit learned as terminal (the RJ-45 turn's recipe,
 # results/rj45_study.md), 700 episodes: results/full_pose_study.md, section 8.
 _PPO_STD2_FLAGS = "--log-std-init -2.0 --scaled-observation --timeout-terminal"
+#: RJ-45's contact-torque scale: its networks read 0.05 N m of wrist torque as one unit.
+_RJ45_TORQUE_FLAG = "--contact-torque-nm 0.05"
 _PPO_STD2_EXTRA = {
     "peg": "",
     "gear": "",
-    "rj45": "--contact-torque-nm 0.05 --force-limit-penalty 1",
+    "rj45": f"{_RJ45_TORQUE_FLAG} --force-limit-penalty 1",
 }
 _PPO_STD2_TAG = {"peg": "so_tt", "gear": "so_tt", "rj45": "so_torque005_pen1_tt"}
-RUNS["rlfd_ppo_std2_tt"] = {
-    task: _run(
-        f"runs/{task}_ppo_std2_{_PPO_STD2_TAG[task]}_e700_s0",
-        task,
-        700,
-        f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip(),
-        algo="ppo",
-    )
-    for task in _PHYSICAL
-}
+
+
+#: Section 8's recipe tag of a fine-tune that reads the observation as the other task's
+#: policy does: gear with RJ-45's torque scale, RJ-45 with gear's (the default).
+_PPO_STD2_TAG_OTHER_READING = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}
+
+
+def _ppo_std2_run(
+    path: str, task: str, episodes: int, tag: str = "", from_other_task: str | None = None
+):
+    """Section 8's PPO recipe for ``task`` ("peg", "gear" or "rj45") on ``path`` (the
+    task or a variant): ``episodes`` episodes into
+    runs/<path's stem>_ppo_std2_<recipe tag><tag>_e<episodes>_s0. With
+    ``from_other_task`` (the run folder of the gear or RJ-45 policy the other one is
+    fine-tuned from) the run starts from that policy and reads the observation as it
+    does (its torque scale is in the copied networks; ``train.copy_policy_parameters``
+    refuses another)."""
+    flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
+    if from_other_task is not None:
+        flags = flags.replace(_RJ45_TORQUE_FLAG, "")
+        if task == "gear":
+            flags += f" {_RJ45_TORQUE_FLAG}"
+        flags += f" --init-from {from_other_task}/policy.zip"
+        recipe_tag = _PPO_STD2_TAG_OTHER_READING[task]
+    folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
+    return _run(folder, path, episodes, " ".join(flags.split()), "ppo")
+
+
+RUNS["rlfd_ppo_std2_tt"] = {task: _ppo_std2_run(task, task, 700) for task in _PHYSICAL}
 # 700 more episodes of the same recipe from each 700-episode policy (a new optimiser).
 RUNS["rlfd_ppo_std2_tt_1400"] = {
     task: _run(
@@ -231,12 +252,7 @@ def _add_ppo_variant_runs(
 ) -> None:
     """RUNS[key]: section 8's PPO recipe (700 episodes, seed 0) on each variant path, and
     (with ``second_stage``) RUNS[key + "_1400"]: 700 more from that task's policy."""
-    RUNS[key] = {
-        path: _run(
-            f"runs/{Path(path).stem}_ppo_std2_so_tt_e700_s0", path, 700, _PPO_STD2_FLAGS, "ppo"
-        )
-        for path in variants.values()
-    }
+    RUNS[key] = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
     if second_stage is None:
         return
     path = variants[second_stage]
@@ -270,34 +286,6 @@ _TRANSFER_INCREMENTAL = {
     "gear": _INCREMENTAL["gear"],
     "rj45": "models/tasks/variants/rj45_slow_insert_incremental.yaml",
 }
-
-
-#: RJ-45's contact-torque scale: its networks read 0.05 N m of wrist torque as one unit.
-_RJ45_TORQUE_FLAG = "--contact-torque-nm 0.05"
-
-
-#: Section 8's recipe tag of a fine-tune that reads the observation as the other task's
-#: policy does: gear with RJ-45's torque scale, RJ-45 with gear's (the default).
-_PPO_STD2_TAG_OTHER_READING = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}
-
-
-def _ppo_std2_run(
-    path: str, task: str, episodes: int, tag: str = "", from_other_task: str | None = None
-):
-    """Section 8's PPO recipe for ``task`` ("gear" or "rj45") on the variant ``path``:
-    ``episodes`` episodes into runs/<variant>_ppo_std2_<recipe tag><tag>_e<episodes>_s0.
-    With ``from_other_task`` (the run folder of the other task's policy) the run starts
-    from that policy and reads the observation as it does (its torque scale is in the
-    copied networks; ``train.copy_policy_parameters`` refuses another)."""
-    flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
-    if from_other_task is not None:
-        flags = flags.replace(_RJ45_TORQUE_FLAG, "")
-        if task == "gear":
-            flags += f" {_RJ45_TORQUE_FLAG}"
-        flags += f" --init-from {from_other_task}/policy.zip"
-        recipe_tag = _PPO_STD2_TAG_OTHER_READING[task]
-    folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
-    return _run(folder, path, episodes, " ".join(flags.split()), "ppo")
 
 
 def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
