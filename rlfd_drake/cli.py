@@ -427,6 +427,29 @@ def _cmd_keep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_select(args: argparse.Namespace) -> int:
+    from rlfd_drake.checkpoint_selection import select_checkpoint
+
+    data = select_checkpoint(
+        args.run,
+        args.task,
+        episodes=args.episodes,
+        seed=args.seed,
+        test_seed=args.test_seed,
+        workers=args.workers,
+        from_episode=args.from_episode,
+        overwrite=args.overwrite,
+    )
+    for index, row in enumerate(data["candidates"]):
+        mark = "  <- chosen" if index == data["chosen"] else ""
+        print(
+            f"{row['training_episodes']:>6} episodes: {100 * row['success_rate']:.1f} % "
+            f"({Path(row['policy']).name}){mark}"
+        )
+    print(f"wrote {data['selected_folder']}/policy.zip and results/select_*.json, .md")
+    return 0
+
+
 def _cmd_seeds(args: argparse.Namespace) -> int:
     from rlfd_drake.seed_study import format_spread, seed_study
 
@@ -883,6 +906,35 @@ def build_parser() -> argparse.ArgumentParser:
         help="evaluate the policies' mean action and/or sampled actions",
     )
     seeds.set_defaults(func=_cmd_seeds)
+
+    select = sub.add_parser(
+        "select",
+        help="choose a run's policy among its checkpoints on validation starts "
+        "(written as runs/<recipe>_selected_s<seed>/)",
+    )
+    select.add_argument("--run", required=True, help="a finished run folder (runs/<name>)")
+    select.add_argument(
+        "--task", default=None, help="the task (a name or a YAML path; default: the run's)"
+    )
+    select.add_argument("--episodes", type=int, default=100, help="validation starts")
+    select.add_argument("--seed", type=int, default=1, help="validation seed (not the test seed)")
+    select.add_argument(
+        "--test-seed",
+        type=int,
+        default=0,
+        help="the evaluation seed results are reported on, refused as validation seed",
+    )
+    select.add_argument(
+        "--from-episode",
+        type=int,
+        default=0,
+        help="consider the policies saved after this many training episodes",
+    )
+    select.add_argument("--workers", type=int, default=2)
+    select.add_argument(
+        "--overwrite", action="store_true", help="replace an earlier selection of this run"
+    )
+    select.set_defaults(func=_cmd_select)
 
     evaluate = sub.add_parser("evaluate", help="evaluate a policy on the paper's grids")
     evaluate.add_argument(
