@@ -102,6 +102,21 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
         train(replace(config, ppo_n_steps=16), run, resume=True, progress_bar=False)
 
 
+def test_the_same_seed_trains_the_same_policy_on_one_machine(tmp_path):
+    """Two runs of one configuration, two env processes each, log the same episodes and
+    save the same networks. (Across machines they need not: another CPU's floating point
+    moves a contact and the runs part after a few episodes.)"""
+    config = TrainConfig(algo="ppo", episodes=4, envs=2, ppo_n_steps=16, seed=3)
+    first, second = tmp_path / "first", tmp_path / "second"
+    for run in (first, second):
+        train(config, run, progress_bar=False)
+    assert (first / "episodes.csv").read_text() == (second / "episodes.csv").read_text()
+    weights = [load_model(run / "policy.zip").policy.state_dict() for run in (first, second)]
+    assert weights[0].keys() == weights[1].keys()
+    assert all(torch.equal(weights[0][key], weights[1][key]) for key in weights[0])
+    assert json.loads((first / "metrics.json").read_text())["gradient_updates"] > 0
+
+
 class _CountCalls(BaseCallback):
     def _on_step(self) -> bool:
         return True
