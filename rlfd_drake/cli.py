@@ -355,12 +355,21 @@ def _cmd_train(args: argparse.Namespace) -> int:
         distance_shaping_axes=args.distance_shaping_axes,
         base_correction=args.base_correction,
         timeout_terminal=args.timeout_terminal,
+        imitate=args.imitate,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
         sac_correlated_noise_time_s=args.sac_correlated_noise_time_s,
         # The default stays TrainConfig's (importing it here would load torch).
         **({} if args.contact_torque_nm is None else {"contact_torque_nm": args.contact_torque_nm}),
+        **{
+            key: value
+            for key, value in (
+                ("imitation_episodes", args.imitation_episodes),
+                ("imitation_epochs", args.imitation_epochs),
+            )
+            if value is not None
+        },
     )
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}_{args.algo}_s{args.seed}"
     metrics = train(config, out, resume=args.resume, progress_bar=not args.no_progress)
@@ -829,6 +838,19 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the learner treats the end of the episode's time as terminal (the "
         "observation carries the time) instead of bootstrapping it as a truncation",
+    )
+    train.add_argument(
+        "--imitate",
+        default=None,
+        help="PPO first copies this hand-written rule (e.g. force_search): its mean fitted "
+        "to the rule's actions on the rule's own episodes, then RL; the copy is "
+        "checkpoints/policy_0_steps.zip. Only the network acts at run time",
+    )
+    train.add_argument(
+        "--imitation-episodes", type=int, default=None, help="the rule's episodes (100)"
+    )
+    train.add_argument(
+        "--imitation-epochs", type=int, default=None, help="passes of the fit over them (100)"
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

@@ -44,6 +44,7 @@ from rlfd_drake.episode import (
     run_episode,
 )
 from rlfd_drake.policies import (
+    RUN_SUBFOLDERS,
     DeployedPolicy,
     check_noise_scale,
     check_residual_mode,
@@ -851,12 +852,17 @@ def write_evaluation(
 
 def policy_stem(spec: str) -> str:
     """A file-name stem for a policy spec: the run folder of a file ``rlfd train`` or a
-    baseline always names the same (policy.zip, baseline.npz), else the file's stem;
-    "a_and_b" for a translation|orientation split."""
+    baseline always names the same (policy.zip, baseline.npz), the run folder and the
+    file's stem for a checkpoint or best model (every run names them alike), else the
+    file's stem; "a_and_b" for a translation|orientation split."""
     if "|" in spec:
         return "_and_".join(policy_stem(part) for part in spec.split("|"))
     path = policy_file(spec)
-    return path.parent.name if path.name in ("policy.zip", "baseline.npz") else path.stem
+    if path.name in ("policy.zip", "baseline.npz"):
+        return path.parent.name
+    if path.parent.name in RUN_SUBFOLDERS and path.parent.parent.name:
+        return f"{path.parent.parent.name}_{path.stem}"
+    return path.stem
 
 
 def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:

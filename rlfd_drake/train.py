@@ -39,6 +39,7 @@ from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
 from rlfd_drake.base_correction import (
+    BASE_CORRECTIONS,
     BaseCorrectedAction,
     applied_residual_mode,
     check_base_correction,
@@ -171,6 +172,14 @@ class TrainConfig:
             (``env.TimeLimitAsTerminal``: the observation carries the time, so waiting
             until it runs out scores 0) instead of bootstrapping it as a truncation
             (SB3's default, and these runs' before 2026-12-01).
+        imitate: a hand-written rule (``base_correction.BASE_CORRECTIONS``, e.g.
+            "force_search") whose behaviour the new PPO policy copies before RL
+            (``imitation``): its mean is fitted to the rule's actions and its value to
+            the returns of ``imitation_episodes`` episodes the rule runs on training
+            starts, for ``imitation_epochs`` passes; that policy is saved as the
+            checkpoint at step 0. At run time only the network acts. None = RL from
+            the zero residual (the paper's rLfD).
+        imitation_episodes, imitation_epochs: the rule's episodes and the fit's passes.
     """
 
     task: str = "peg_easy"
@@ -211,6 +220,9 @@ class TrainConfig:
     distance_shaping_axes: str = "all"
     base_correction: str | None = None
     timeout_terminal: bool = False
+    imitate: str | None = None
+    imitation_episodes: int = 100
+    imitation_epochs: int = 100
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -230,6 +242,8 @@ class TrainConfig:
             "checkpoint_every_episodes",
             "ppo_n_steps",
             "sac_gradient_steps",
+            "imitation_episodes",
+            "imitation_epochs",
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -306,6 +320,8 @@ class TrainConfig:
                 f"base_correction={self.base_correction!r} needs composition 'residual', got "
                 f"{self.composition!r}"
             )
+        if self.imitate is not None:
+            self._check_imitation()
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -316,6 +332,29 @@ class TrainConfig:
             DISCOUNT,
             self.distance_shaping_axes,
         )
+
+    def _check_imitation(self) -> None:
+        """ValueError naming the setting that imitation of a rule cannot go with."""
+        if self.imitate not in BASE_CORRECTIONS:
+            raise ValueError(
+                f"imitate must be one of {sorted(BASE_CORRECTIONS)}, got {self.imitate!r}"
+            )
+        conflicts = {
+            "algo": (self.algo != "ppo", f"{self.algo!r} (imitation fits PPO's actor-critic)"),
+            "init_from": (self.init_from is not None, "set (both choose the start)"),
+            "base_correction": (
+                self.base_correction is not None,
+                "set (the rule would act twice: under the learner and in it)",
+            ),
+            "applied_action_only": (
+                self.applied_action_only,
+                "set (the rule gives the whole 6-D residual)",
+            ),
+            "composition": (self.composition != "residual", f"{self.composition!r}"),
+        }
+        for name, (bad, why) in conflicts.items():
+            if bad:
+                raise ValueError(f"imitate={self.imitate!r} cannot go with {name} {why}")
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
@@ -663,6 +702,28 @@ class EveryNEpisodes(EventCallback):
         return self._on_event()
 
 
+def start_from_teacher(model: BaseAlgorithm, config: TrainConfig) -> dict:
+    """Fits ``model``'s policy to ``config.imitate``'s behaviour (``imitation``) on
+    episodes of envs seeded apart from training's; returns what the fit did."""
+    from rlfd_drake.imitation import collect_teacher_episodes, fit_policy_to_teacher
+
+    start = time.perf_counter()
+    venv = make_envs(config, config.envs, config.seed + 20_000)
+    try:
+        data = collect_teacher_episodes(venv, config.imitate, config.imitation_episodes, DISCOUNT)
+    finally:
+        venv.close()
+    collect_wall = time.perf_counter() - start
+    fit = fit_policy_to_teacher(model.policy, data, config.imitation_epochs, config.seed)
+    return {
+        "teacher": config.imitate,
+        "teacher_episodes": data.episodes,
+        "teacher_success_rate": float(np.mean(data.successes)),
+        "collect_wall_time_s": collect_wall,
+        **fit,
+    }
+
+
 def _newest_checkpoint(run_dir: Path) -> Path | None:
     checkpoints = sorted(
         (run_dir / "checkpoints").glob("*_steps.zip"),
@@ -715,6 +776,11 @@ def train(
         model = make_model(config, venv, run_dir / "tb")
         if config.init_from is not None:
             copy_policy_parameters(load_model(config.init_from), model)
+        if config.imitate is not None:
+            imitation = start_from_teacher(model, config)
+            (run_dir / "checkpoints").mkdir(exist_ok=True)
+            model.save(str(run_dir / "checkpoints" / "policy_0_steps.zip"))
+            (run_dir / "imitation.json").write_text(format_json(imitation) + "\n")
 
     # Checkpoints and evaluations fire on finished episodes (their children then act
     # on every trigger).
@@ -768,6 +834,8 @@ def train(
         "gradient_updates": int(getattr(model, "_n_updates", 0)),
         "date": utc_now(),  # when training finished
     }
+    if (run_dir / "imitation.json").is_file():
+        metrics["imitation"] = json.loads((run_dir / "imitation.json").read_text())
     if metrics["gradient_updates"] == 0:
         warnings.warn(
             f"{run_dir}: no gradient update in {metrics['timesteps']} steps, so policy.zip "

@@ -63,6 +63,10 @@ def test_evaluation_file_names_of_policy_specs():
     assert policy_stem("sac:runs/peg_sac_s0/policy.zip") == "peg_sac_s0"
     assert policy_stem("models/policies/peg_easy_sac.zip") == "peg_easy_sac"
     assert policy_stem("runs/peg_linear_s0/baseline.npz|random") == "peg_linear_s0_and_random"
+    # Every run names its checkpoints alike: the run folder keeps them apart.
+    checkpoint = "runs/peg_ppo_s0/checkpoints/policy_2000_steps.zip"
+    assert policy_stem(checkpoint) == "peg_ppo_s0_policy_2000_steps"
+    assert policy_stem("runs/peg_ppo_s0/eval/best_model.zip") == "peg_ppo_s0_best_model"
     from rlfd_drake.evaluate import evaluation_name
 
     stem = "runs/peg_sac_s0/policy.zip"
