@@ -202,6 +202,8 @@ def seed_study(
             "training_wall_time_s": run.metrics.get("wall_time_s"),
             "success": {},
             "evaluations": {},
+            # A policy chosen among the run's checkpoints (rlfd select): its record.
+            "selection_record": run.metrics.get("selection_record"),
         }
         for task in tasks:
             for label in actions:
@@ -256,6 +258,20 @@ def seed_study(
     return data
 
 
+def _selection_lines(per_seed: list[dict]) -> list[str]:
+    """Where each seed's policy was chosen among its checkpoints (``rlfd select``), if
+    any was: the episodes column is then the chosen checkpoint's."""
+    records = [(row["seed"], row.get("selection_record")) for row in per_seed]
+    if not any(record for _, record in records):
+        return []
+    chosen = ", ".join(f"seed {seed}: `{record or 'the final policy'}`" for seed, record in records)
+    return [
+        "Each policy was chosen among its run's checkpoints on validation starts "
+        f"(rlfd select; episodes = the chosen checkpoint's): {chosen}.",
+        "",
+    ]
+
+
 def seed_study_markdown(data: dict) -> str:
     """The study as a Markdown table: one row per seed, then mean +- std over seeds."""
     columns = data["columns"]
@@ -269,6 +285,7 @@ def seed_study_markdown(data: dict) -> str:
         "",
         *[f"    {command}" for command in data["commands"] if command],
         "",
+        *_selection_lines(data["per_seed"]),
         "| training seed | episodes | wall-clock (s) | "
         + " | ".join(_column_label(column) for column in columns)
         + (" | meets targets |" if targets else " |"),

@@ -89,6 +89,14 @@ def test_study_reuses_stored_evaluations_and_reports_the_spread(tmp_path, monkey
     assert mean_only["columns"] == ["peg_hard/mean"]
     assert mean_only["over_seeds"]["peg_hard/mean"]["mean"] == pytest.approx(54.33333, abs=1e-4)
     assert "peg_hard, sampled" not in (tmp_path / "results" / "seeds_recipe_mean.md").read_text()
+    assert "chosen among its run's checkpoints" not in markdown
+    # A seed whose policy rlfd select chose among its checkpoints says where.
+    metrics = json.loads((folders[0] / "metrics.json").read_text())
+    record = "results/select_recipe_s2_n100_s1.json"
+    (folders[0] / "metrics.json").write_text(json.dumps({**metrics, "selection_record": record}))
+    seed_study(folders, ["peg_hard"], actions=("mean",), name="recipe_selected")
+    chosen = (tmp_path / "results" / "seeds_recipe_selected.md").read_text()
+    assert f"seed 2: `{record}`" in chosen and "seed 0: `the final policy`" in chosen
 
 
 def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, monkeypatch):
