@@ -27,7 +27,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from rlfd_drake.results import new_result_path, results_dir, write_result
+from rlfd_drake.policies import checkpoint_steps
+from rlfd_drake.results import format_json, new_result_path, results_dir, write_result
 from rlfd_drake.run_log import read_episode_log
 
 __all__ = [
@@ -47,11 +48,6 @@ class Candidate:
     path: Path
     timesteps: int
     episodes: int
-
-
-def _checkpoint_steps(path: Path) -> int:
-    """The steps of SB3's ``policy_<steps>_steps.zip``."""
-    return int(path.stem.split("_")[-2])
 
 
 def _episodes_by_steps(run_dir: Path) -> list[tuple[int, int]]:
@@ -83,10 +79,11 @@ def run_candidates(run_dir: str | Path, from_episode: int = 0) -> list[Candidate
         return sum(1 for _, end in ends if end <= steps)
 
     final_steps = int(metrics["timesteps"])
+    saved = {path: checkpoint_steps(path) for path in (run_dir / "checkpoints").glob("*_steps.zip")}
     found = [
-        Candidate(path, _checkpoint_steps(path), episodes_at(_checkpoint_steps(path)))
-        for path in (run_dir / "checkpoints").glob("policy_*_steps.zip")
-        if _checkpoint_steps(path) < final_steps
+        Candidate(path, steps, episodes_at(steps))
+        for path, steps in saved.items()
+        if steps < final_steps
     ]
     found.append(Candidate(run_dir / "policy.zip", final_steps, int(metrics["episodes"])))
     chosen = sorted((c for c in found if c.episodes >= from_episode), key=lambda c: c.timesteps)
@@ -213,7 +210,7 @@ def select_checkpoint(
         "selection": {key: value for key, value in selection.items() if key != "candidates"},
         "selection_record": f"results/{name}.json",
     }
-    (destination / "metrics.json").write_text(json.dumps(selected_metrics, indent=2) + "\n")
+    (destination / "metrics.json").write_text(format_json(selected_metrics) + "\n")
     data = {**selection, "training_command": config_record.get("command")}
     write_result(name, data, seed=seed)
     (results_dir() / f"{name}.md").write_text(selection_markdown(data))

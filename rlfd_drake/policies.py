@@ -29,6 +29,11 @@ SB3_CLASSES = {
 RUN_SUBFOLDERS = ("checkpoints", "eval")
 
 
+def checkpoint_steps(path: str | Path) -> int:
+    """The training steps of a checkpoint SB3 saved as ``<prefix>_<steps>_steps.zip``."""
+    return int(Path(path).stem.split("_")[-2])
+
+
 def _sb3_kind_from_zip(path: Path) -> str | None:
     """The algorithm of an SB3 zip from its policy class module, or None if unclear."""
     try:

@@ -59,7 +59,7 @@ from rlfd_drake.observation_scaling import (
     ScaledObservation,
     contact_scales,
 )
-from rlfd_drake.policies import load_sb3_model
+from rlfd_drake.policies import checkpoint_steps, load_sb3_model
 from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
@@ -727,7 +727,7 @@ def start_from_teacher(model: BaseAlgorithm, config: TrainConfig) -> dict:
 def _newest_checkpoint(run_dir: Path) -> Path | None:
     checkpoints = sorted(
         (run_dir / "checkpoints").glob("*_steps.zip"),
-        key=lambda p: int(p.stem.split("_")[-2]),
+        key=checkpoint_steps,
     )
     return checkpoints[-1] if checkpoints else None
 
@@ -834,6 +834,7 @@ def train(
         "gradient_updates": int(getattr(model, "_n_updates", 0)),
         "date": utc_now(),  # when training finished
     }
+    # Read back from the file: a resumed run did its imitation in an earlier process.
     if (run_dir / "imitation.json").is_file():
         metrics["imitation"] = json.loads((run_dir / "imitation.json").read_text())
     if metrics["gradient_updates"] == 0:
