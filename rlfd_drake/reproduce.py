@@ -22,7 +22,8 @@ residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush
 same whose residual may not push down), ``incremental_push2mm`` /
 ``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
 ``6_wrist_smooth`` and ``6_incremental`` (Table VI between those variants of gear and
-RJ-45); 5 and the force tables reuse the other tables' evaluations.
+RJ-45), ``rj45_imitation`` (RJ-45 with PPO started from a copy of the force-guided
+search); 5 and the force tables reuse the other tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -83,6 +84,9 @@ class Row:
         orientation_source: if given ("random"), the orientation part of the residual
             comes from it and the translation from ``source`` (Table IV's Linear /
             Random); the evaluation then runs the full residual.
+        checkpoint: with a "run:" source, the stem of one of the run's checkpoints
+            (e.g. "policy_0_steps": an imitated policy before RL) instead of its final
+            policy.
     """
 
     label: str
@@ -94,18 +98,22 @@ class Row:
     composition: str = "residual"
     orientation_source: str | None = None
     noise_scale: float = 1.0
+    checkpoint: str | None = None
 
 
 @dataclass(frozen=True)
 class Table:
     """A table: its rows, its columns (label -> task) and the metric it reports
-    ("success" %, "insertion_time" s or "peak_force" N)."""
+    ("success" %, "insertion_time" s or "peak_force" N). ``evaluation_episodes``, if
+    given, is the starts per cell whatever the budget (e.g. 160: RJ-45's whole grid,
+    as its studies evaluate)."""
 
     title: str
     columns: dict[str, str]
     rows: list[Row] = field(default_factory=list)
     note: str = ""
     metric: str = "success"
+    evaluation_episodes: int | None = None
 
 
 _SIM = {"easy": "peg_easy", "hard": "peg_hard"}
@@ -315,6 +323,32 @@ def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
 
 
 _add_ppo_transfer_runs("_incremental", _TRANSFER_INCREMENTAL)
+# RJ-45 from a copy of the force-guided search: PPO's mean fitted to the rule's actions
+# on 200 training episodes (``rlfd train --imitate``), then section 8's RJ-45 recipe for
+# 700 episodes and 700 more from that policy. results/rj45_study.md, last section.
+_RJ45_SLOW_INSERT = "models/tasks/variants/rj45_slow_insert.yaml"
+_IMITATION_FLAGS = "--imitate force_search --imitation-episodes 200"
+
+
+def _add_imitation_runs(tasks: tuple[str, ...]) -> None:
+    """RUNS["ppo_imitate_fs"] (the copy of the search, then 700 PPO episodes) and
+    RUNS["ppo_imitate_fs_1400"] (700 more from it) on each RJ-45 task path."""
+    flags = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA['rj45']}"
+    RUNS["ppo_imitate_fs"], RUNS["ppo_imitate_fs_1400"] = {}, {}
+    for path in tasks:
+        folder = f"runs/{Path(path).stem}_ppo_std2_imitate_fs_torque005_pen1_tt"
+        first = _run(f"{folder}_e700_s0", path, 700, f"{flags} {_IMITATION_FLAGS}", "ppo")
+        RUNS["ppo_imitate_fs"][path] = first
+        RUNS["ppo_imitate_fs_1400"][path] = _run(
+            f"{folder}_e700_then700_s0",
+            path,
+            700,
+            f"{flags} --init-from {first[0]}/policy.zip",
+            "ppo",
+        )
+
+
+_add_imitation_runs((_RJ45_SLOW_INSERT, "rj45"))
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -441,6 +475,21 @@ def _trained_episodes(run: Path) -> int | None:
         return episodes
     earlier = _trained_episodes(Path(init_from).parent)
     return None if earlier is None else episodes + earlier
+
+
+def _checkpoint_episodes(run: Path, checkpoint: str) -> int | None:
+    """The training episodes behind a checkpoint of ``run``: those of the stages before
+    it for the step-0 copy (an imitated or ``--init-from`` start), else None (a
+    checkpoint's episode count is not logged)."""
+    from rlfd_drake.policies import checkpoint_steps
+
+    if checkpoint_steps(checkpoint) != 0:
+        return None
+    config = run_log_file(run, "config.json")
+    if config is None:
+        return None
+    init_from = json.loads(config.read_text())["config"].get("init_from")
+    return 0 if init_from is None else _trained_episodes(Path(init_from).parent)
 
 
 def _mean_and_sampled(
@@ -844,6 +893,37 @@ TABLES["6_incremental"] = Table(
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
 
+_IMITATION_COLUMNS = {"rj45 slow insert": _RJ45_SLOW_INSERT, "rj45": "rj45"}
+#: The paper's RJ-45 figures (Table IV): its DMP alone and its full-pose rLfD.
+_PAPER_RJ45 = dict.fromkeys(_IMITATION_COLUMNS, 0.0), dict.fromkeys(_IMITATION_COLUMNS, 70.6)
+TABLES["rj45_imitation"] = Table(
+    "RJ-45 with PPO started from a copy of the force-guided search (mean action)",
+    _IMITATION_COLUMNS,
+    [
+        Row("DMP alone", "dmp", _PAPER_RJ45[0]),
+        Row("Force-guided search (hand-written teacher, not in the paper)", "force_search", {}),
+        Row(
+            "PPO's copy of the search, before RL",
+            "run:ppo_imitate_fs",
+            {},
+            checkpoint="policy_0_steps",
+        ),
+        Row("PPO from the copy, 700 episodes", "run:ppo_imitate_fs", _PAPER_RJ45[1]),
+        Row("PPO from the copy, 1,400 episodes", "run:ppo_imitate_fs_1400", _PAPER_RJ45[1]),
+    ],
+    "Before RL, PPO's mean is fitted to the actions of the force-guided search on 200 "
+    "training episodes and its value to their discounted returns (rlfd train --imitate "
+    "force_search --imitation-episodes 200); then section 8's RJ-45 recipe (log std -2, "
+    "scaled observation with a 0.05 N m torque scale, force-limit penalty 1, time limit "
+    "terminal) for 700 episodes, and 700 more from that policy (--init-from). At run time "
+    "the network acts alone. Columns: models/tasks/variants/rj45_slow_insert.yaml (the "
+    "slow demonstration) and the shipped rj45. All 160 starts of RJ-45's grid, whatever "
+    "the budget; training seed 0 (other seeds: results/seeds_*imitate*.md). The paper's "
+    "figures are its physical robot (Table IV: DMP 0 %, PPO / PPO 70.6 %); its rLfD starts "
+    "from the zero residual, not from a teacher.",
+    evaluation_episodes=160,
+)
+
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.
 _DEFAULT_BOUNDS = (0.01, 0.087)
 
@@ -944,13 +1024,20 @@ def stored_or_new_evaluation(
 
 
 def _cell(
-    row: Row, task: str, budget: str, seed: int, workers: int, metric: str = "success"
+    row: Row,
+    task: str,
+    budget: str,
+    seed: int,
+    workers: int,
+    metric: str = "success",
+    evaluation_episodes: int | None = None,
 ) -> tuple[dict, dict | None]:
     """The table cell of ``row`` on ``task`` and the evaluation it reports (None
-    when not run)."""
-    from rlfd_drake.evaluate import NAMED_POLICIES, sampling_suffix
+    when not run); ``evaluation_episodes`` overrides the budget's starts."""
+    from rlfd_drake.evaluate import NAMED_POLICIES, policy_stem, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
+    eval_episodes = evaluation_episodes or eval_episodes
     kind, _, detail = row.source.partition(":")
     if kind == "none":
         return {"status": "not run", "reason": detail}, None
@@ -966,9 +1053,13 @@ def _cell(
             return {"status": "not run", "reason": f"no {detail} run on {task}"}, None
         folder, command = RUNS[detail][task]
         run = Path(folder)
-        trained = _trained_episodes(run)
-        policy, label = str(run / "policy.zip"), run.name
-        missing = f"no policy in {run} (train it: {command})"
+        if row.checkpoint is None:
+            trained, policy = _trained_episodes(run), str(run / "policy.zip")
+        else:
+            trained = _checkpoint_episodes(run, row.checkpoint)
+            policy = str(run / "checkpoints" / f"{row.checkpoint}.zip")
+        label = policy_stem(policy)
+        missing = f"no policy at {policy} (train it: {command})"
     elif kind == "baseline":
         train_task = row.train_task or task
         run = _baseline_path(detail, train_task, row.residual_mode, train_episodes, seed)
@@ -1145,7 +1236,7 @@ def reproduce_table(number: str, budget: str = "quick", seed: int = 0, workers: 
     print(f"{table.title} (budget {budget})", flush=True)
     measured = {
         row.label: {
-            column: _cell(row, task, budget, seed, workers, table.metric)
+            column: _cell(row, task, budget, seed, workers, table.metric, table.evaluation_episodes)
             for column, task in table.columns.items()
         }
         for row in table.rows

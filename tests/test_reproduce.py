@@ -513,3 +513,45 @@ def test_the_incremental_ppo_transfer_rows_fine_tune_the_other_tasks_700_episode
     )
     labels = [row.label for row in reproduce.TABLES["6_incremental"].rows]
     assert "PPO, incremental: 60 episodes from the source, mean action" in labels
+
+
+def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_grid(
+    tmp_path, monkeypatch
+):
+    """The RJ-45 imitation table asks for 160 starts whatever the budget, evaluates the
+    step-0 checkpoint (the copy of the search before RL) under its run's name, and counts
+    0, 700 and 1,400 training episodes from the runs' logs (the second stage through
+    its --init-from)."""
+    monkeypatch.chdir(tmp_path)
+    asked = []
+
+    def recording_evaluation(task, policy, name, mode, episodes, *args, **kwargs):
+        asked.append((task, policy, name, episodes))
+        return _fake_evaluation(task, policy, name, mode, episodes, *args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
+    runs = reproduce.RUNS
+    slow = "models/tasks/variants/rj45_slow_insert.yaml"
+    first, second = runs["ppo_imitate_fs"][slow][0], runs["ppo_imitate_fs_1400"][slow][0]
+    assert "--imitate force_search --imitation-episodes 200" in runs["ppo_imitate_fs"][slow][1]
+    assert f"--init-from {first}/policy.zip" in runs["ppo_imitate_fs_1400"][slow][1]
+    for folder, init_from in ((first, None), (second, f"{first}/policy.zip")):
+        Path(folder, "checkpoints").mkdir(parents=True)
+        Path(folder, "policy.zip").write_bytes(b"")
+        Path(folder, "metrics.json").write_text(json.dumps({"episodes": 700}))
+        config = {"config": {"init_from": init_from}}
+        Path(folder, "config.json").write_text(json.dumps(config))
+    Path(first, "checkpoints", "policy_0_steps.zip").write_bytes(b"")
+    data = reproduce.reproduce_table("rj45_imitation", budget="quick", seed=0, workers=1)
+    assert {episodes for *_, episodes in asked} == {160}
+    names = {name for task, _, name, _ in asked if task == slow}
+    stem = Path(first).name
+    assert f"eval_rj45_slow_insert_{stem}_policy_0_steps_n160_s0" in names
+    assert f"eval_rj45_slow_insert_{stem}_n160_s0" in names
+    rows = {row["label"]: row["ours"]["rj45 slow insert"] for row in data["rows"]}
+    trained = [rows[label]["training_episodes"] for label in list(rows)[2:]]
+    assert trained == [0, 700, 1400]
+    # The shipped task's runs are not here: their rows say what trains them.
+    shipped = next(r for r in data["rows"] if r["label"].endswith("1,400 episodes"))["ours"]
+    assert shipped["rj45"]["status"] == "not run"
+    assert "--task rj45 " in shipped["rj45"]["reason"]
