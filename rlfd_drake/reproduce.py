@@ -1186,7 +1186,8 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
             parts.append("n/a" if paper is None else f"{paper:.1f}")
             if cell["status"] == "measured":
                 parts.append(_format_metric(cell, table.metric))
-                trained.append(str(cell["training_episodes"] or "n/a"))
+                episodes = cell["training_episodes"]  # 0: a copy before RL
+                trained.append("n/a" if episodes is None else str(episodes))
             else:
                 parts.append("not run")
         # One figure when every column's policy trained as long, else one per distinct value.
