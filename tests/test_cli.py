@@ -156,6 +156,33 @@ def test_the_shipped_policy_records_its_translation_only_training():
     assert "--residual-mode translation" in command and "--task peg_easy" in command
 
 
+def test_the_shipped_rj45_policy_reads_the_torque_as_trained_and_runs_alone():
+    """models/policies/rj45_slow_insert_ppo_imitate.zip (results/rj45_study.md): PPO
+    started from a copy of the force search; its networks read the wrist torque at
+    0.05 N m per unit (a buffer of the copied feature extractor), its sidecar names the
+    run it continued, and an evaluation episode runs the network with no rule beside it."""
+    import numpy as np
+
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.observation_scaling import contact_scales
+    from rlfd_drake.paths import models_dir
+    from rlfd_drake.policies import load_sb3_model, training_config_file
+
+    shipped = models_dir() / "policies" / "rj45_slow_insert_ppo_imitate.zip"
+    model, kind = load_sb3_model(shipped)
+    assert kind == "ppo"
+    per_step = np.asarray(contact_scales(0.05), dtype=np.float32)
+    scales = model.policy.features_extractor.scales.numpy()
+    assert np.array_equal(scales, np.tile(per_step, scales.size // per_step.size))
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert config["task"].endswith("rj45_slow_insert.yaml") and config["base_correction"] is None
+    assert "imitate_fs" in config["init_from"]
+    result = evaluate(
+        "models/tasks/variants/rj45_slow_insert.yaml", str(shipped), 1, 0, workers=1, progress=False
+    )
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
+
+
 def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     """rlfd plot: the stored evaluations, one panel per task, without running anything."""
     from PIL import Image
