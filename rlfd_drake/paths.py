@@ -10,6 +10,8 @@ from pathlib import Path
 SHIPPED_POLICY = "policies/peg_easy_sac_translation_gs4.zip"
 SHIPPED_FULL_POSE_POLICY = "policies/peg_easy_sac.zip"
 SHIPPED_PPO_POLICY = "policies/peg_easy_ppo.zip"
+#: The RJ-45 policy (PPO from a copy of the force search, rj45_slow_insert variant).
+SHIPPED_RJ45_POLICY = "policies/rj45_slow_insert_ppo_imitate.zip"
 
 
 def models_dir() -> Path:

@@ -463,14 +463,20 @@ _add_sac_transfer_runs(
 )
 
 
+def _training_config(run: Path) -> dict | None:
+    """``run``'s training configuration (its folder's or its kept log's), None if absent."""
+    config = run_log_file(run, "config.json")
+    return json.loads(config.read_text())["config"] if config else None
+
+
 def _trained_episodes(run: Path) -> int | None:
     """The training episodes behind ``run``'s policy: its own, plus those of the run it
     started from (``--init-from``), so a policy trained in stages counts them all; None
     when a stage's log is not here."""
     metrics = run_log_file(run, "metrics.json")
     episodes = json.loads(metrics.read_text()).get("episodes") if metrics else None
-    config = run_log_file(run, "config.json")
-    init_from = json.loads(config.read_text())["config"].get("init_from") if config else None
+    config = _training_config(run)
+    init_from = config.get("init_from") if config else None
     if episodes is None or init_from is None:
         return episodes
     earlier = _trained_episodes(Path(init_from).parent)
@@ -483,12 +489,10 @@ def _checkpoint_episodes(run: Path, checkpoint: str) -> int | None:
     checkpoint's episode count is not logged)."""
     from rlfd_drake.policies import checkpoint_steps
 
-    if checkpoint_steps(checkpoint) != 0:
+    config = _training_config(run)
+    if checkpoint_steps(checkpoint) != 0 or config is None:
         return None
-    config = run_log_file(run, "config.json")
-    if config is None:
-        return None
-    init_from = json.loads(config.read_text())["config"].get("init_from")
+    init_from = config.get("init_from")
     return 0 if init_from is None else _trained_episodes(Path(init_from).parent)
 
 
@@ -895,12 +899,13 @@ TABLES["6_incremental"] = Table(
 
 _IMITATION_COLUMNS = {"rj45 slow insert": _RJ45_SLOW_INSERT, "rj45": "rj45"}
 #: The paper's RJ-45 figures (Table IV): its DMP alone and its full-pose rLfD.
-_PAPER_RJ45 = dict.fromkeys(_IMITATION_COLUMNS, 0.0), dict.fromkeys(_IMITATION_COLUMNS, 70.6)
+_PAPER_RJ45_DMP = dict.fromkeys(_IMITATION_COLUMNS, 0.0)
+_PAPER_RJ45_RLFD = dict.fromkeys(_IMITATION_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"])
 TABLES["rj45_imitation"] = Table(
     "RJ-45 with PPO started from a copy of the force-guided search (mean action)",
     _IMITATION_COLUMNS,
     [
-        Row("DMP alone", "dmp", _PAPER_RJ45[0]),
+        Row("DMP alone", "dmp", _PAPER_RJ45_DMP),
         Row("Force-guided search (hand-written teacher, not in the paper)", "force_search", {}),
         Row(
             "PPO's copy of the search, before RL",
@@ -908,8 +913,8 @@ TABLES["rj45_imitation"] = Table(
             {},
             checkpoint="policy_0_steps",
         ),
-        Row("PPO from the copy, 700 episodes", "run:ppo_imitate_fs", _PAPER_RJ45[1]),
-        Row("PPO from the copy, 1,400 episodes", "run:ppo_imitate_fs_1400", _PAPER_RJ45[1]),
+        Row("PPO from the copy, 700 episodes", "run:ppo_imitate_fs", _PAPER_RJ45_RLFD),
+        Row("PPO from the copy, 1,400 episodes", "run:ppo_imitate_fs_1400", _PAPER_RJ45_RLFD),
     ],
     "Before RL, PPO's mean is fitted to the actions of the force-guided search on 200 "
     "training episodes and its value to their discounted returns (rlfd train --imitate "

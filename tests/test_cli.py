@@ -165,10 +165,10 @@ def test_the_shipped_rj45_policy_reads_the_torque_as_trained_and_runs_alone():
 
     from rlfd_drake.evaluate import evaluate
     from rlfd_drake.observation_scaling import contact_scales
-    from rlfd_drake.paths import models_dir
+    from rlfd_drake.paths import SHIPPED_RJ45_POLICY, models_dir
     from rlfd_drake.policies import load_sb3_model, training_config_file
 
-    shipped = models_dir() / "policies" / "rj45_slow_insert_ppo_imitate.zip"
+    shipped = models_dir() / SHIPPED_RJ45_POLICY
     model, kind = load_sb3_model(shipped)
     assert kind == "ppo"
     per_step = np.asarray(contact_scales(0.05), dtype=np.float32)
