@@ -339,6 +339,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         sac_target_entropy=args.sac_target_entropy,
         log_std_init=args.log_std_init,
         learning_rate=args.learning_rate,
+        learning_rate_schedule=args.learning_rate_schedule,
         ppo_sde_sample_steps=args.ppo_sde_sample_steps,
         sac_learning_starts=args.sac_learning_starts,
         sac_initial_ent_coef=args.sac_initial_ent_coef,
@@ -695,6 +696,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="SAC: entropy the tuning holds (default SB3's -6; +1 keeps a ~0.3 std jiggle)",
     )
     train.add_argument("--learning-rate", type=float, default=3e-4, help="optimiser step size")
+    train.add_argument(
+        "--learning-rate-schedule",
+        choices=["constant", "linear"],
+        default="constant",
+        help="linear: the step size falls to 0 over the run's episodes",
+    )
     train.add_argument(
         "--ppo-sde-sample-steps",
         type=int,

@@ -489,8 +489,10 @@ def _checkpoint_episodes(run: Path, checkpoint: str) -> int | None:
     checkpoint's episode count is not logged)."""
     from rlfd_drake.policies import checkpoint_steps
 
+    if checkpoint_steps(checkpoint) != 0:
+        return None
     config = _training_config(run)
-    if checkpoint_steps(checkpoint) != 0 or config is None:
+    if config is None:
         return None
     init_from = config.get("init_from")
     return 0 if init_from is None else _trained_episodes(Path(init_from).parent)

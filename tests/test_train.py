@@ -15,7 +15,15 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.env import SHAPING_AXES, RlfdEnv
-from rlfd_drake.train import EveryNEpisodes, TrainConfig, load_model, make_model, train
+from rlfd_drake.train import (
+    EpisodeProgress,
+    EveryNEpisodes,
+    LinearDecayOverEpisodes,
+    TrainConfig,
+    load_model,
+    make_model,
+    train,
+)
 
 FAST = RlfdDiagramConfig(residual_activation_s=0.3)
 
@@ -678,3 +686,30 @@ def test_init_from_refuses_a_source_that_reads_the_observation_differently(algo)
         rj45_reading.policy.state_dict().items(), same.policy.state_dict().values(), strict=True
     ):
         assert torch.equal(a, b), name
+
+
+def test_linear_learning_rate_falls_to_zero_over_the_run_episodes():
+    progress = EpisodeProgress(done=0, total=4)
+    schedule = LinearDecayOverEpisodes(1e-3, progress)
+    assert schedule(0.9) == pytest.approx(1e-3)  # SB3's own progress is ignored
+    progress.done = 3
+    assert schedule(0.9) == pytest.approx(2.5e-4)
+    progress.done = 5  # the last rollout may run past the budget
+    assert schedule(0.9) == 0.0
+    with pytest.raises(ValueError, match="learning_rate_schedule must be one of"):
+        TrainConfig(learning_rate_schedule="cosine")
+
+
+def test_a_linear_schedule_run_ends_with_a_smaller_step_than_it_started(tmp_path):
+    config = TrainConfig(
+        algo="ppo", episodes=2, envs=1, ppo_n_steps=8, learning_rate_schedule="linear"
+    )
+    train(config, tmp_path / "run", progress_bar=False)
+    model = load_model(tmp_path / "run" / "policy.zip")
+    # The optimiser keeps the step of the last update, taken after the first episode.
+    last_step = model.policy.optimizer.param_groups[0]["lr"]
+    assert 0.0 <= last_step <= 0.5 * config.learning_rate
+    constant = replace(config, learning_rate_schedule="constant")
+    train(constant, tmp_path / "constant", progress_bar=False)
+    steady = load_model(tmp_path / "constant" / "policy.zip")
+    assert steady.policy.optimizer.param_groups[0]["lr"] == pytest.approx(config.learning_rate)
