@@ -282,6 +282,27 @@ _INCREMENTAL_NOPUSH = {
     task: f"models/tasks/variants/{task}_incremental_nopush.yaml" for task in ("peg", "gear")
 }
 _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second_stage="gear")
+# The same recipes in one run whose step size falls linearly to zero over its episodes
+# (peg: 700 pushing, gear: 1,400 not pushing): results/full_pose_study.md, section 15.
+_LINEAR_LR_FLAGS = f"{_PPO_STD2_FLAGS} --learning-rate-schedule linear"
+RUNS["rlfd_ppo_incremental_lrlin"] = {
+    _INCREMENTAL["peg"]: _run(
+        "runs/peg_incremental_ppo_std2_so_tt_lrlin_e700_s0",
+        _INCREMENTAL["peg"],
+        700,
+        _LINEAR_LR_FLAGS,
+        "ppo",
+    )
+}
+RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"] = {
+    _INCREMENTAL_NOPUSH["gear"]: _run(
+        "runs/gear_incremental_nopush_ppo_std2_so_tt_lrlin_e1400_s0",
+        _INCREMENTAL_NOPUSH["gear"],
+        1400,
+        _LINEAR_LR_FLAGS,
+        "ppo",
+    )
+}
 # Peg's incremental variant whose residual may push down at most 2 mm (4 N at the
 # controller's 2000 N/m). results/full_pose_study.md, section 11.
 _INCREMENTAL_PUSH2MM = {"peg": "models/tasks/variants/peg_incremental_push2mm.yaml"}
@@ -821,6 +842,10 @@ _add_variant_tables(
     [
         ("PPO / PPO (rLfD), incremental, 700 episodes", "rlfd_ppo_incremental"),
         ("PPO / PPO (rLfD), incremental, 1,400 episodes", "rlfd_ppo_incremental_1400"),
+        (
+            "PPO / PPO (rLfD), incremental, step size falling to 0, 700 episodes",
+            "rlfd_ppo_incremental_lrlin",
+        ),
     ],
     "The shipped tasks whose residual action is a rate (residual_rate_per_s = 2: an "
     "action of 1 moves the offset by the whole 1 cm / 5 deg range in 0.5 s; "
@@ -839,6 +864,10 @@ _add_variant_tables(
         (
             "PPO / PPO (rLfD), incremental, no push, 1,400 episodes",
             "rlfd_ppo_incremental_nopush_1400",
+        ),
+        (
+            "PPO / PPO (rLfD), incremental, no push, step size falling to 0, 1,400 episodes",
+            "rlfd_ppo_incremental_nopush_lrlin_1400",
         ),
     ],
     "The incremental variants (residual_rate_per_s = 2) whose residual offset may lift, "

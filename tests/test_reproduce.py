@@ -561,3 +561,29 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
     shipped = next(r for r in data["rows"] if r["label"].endswith("1,400 episodes"))["ours"]
     assert shipped["rj45"]["status"] == "not run"
     assert "--task rj45 " in shipped["rj45"]["reason"]
+
+
+@pytest.mark.parametrize(
+    "run_key, path, episodes",
+    [
+        ("rlfd_ppo_incremental_lrlin", "models/tasks/variants/peg_incremental.yaml", 700),
+        (
+            "rlfd_ppo_incremental_nopush_lrlin_1400",
+            "models/tasks/variants/gear_incremental_nopush.yaml",
+            1400,
+        ),
+    ],
+)
+def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
+    run_key, path, episodes
+):
+    """Section 15's rows: one run (no --init-from stage) of section 8's PPO recipe with the
+    linear schedule, into the folder the row evaluates, as ``rlfd train`` parses it."""
+    from rlfd_drake.cli import build_parser
+
+    folder, command = reproduce.RUNS[run_key][path]
+    args = build_parser().parse_args(command.split()[1:])
+    assert args.learning_rate_schedule == "linear"
+    assert (args.task, args.episodes, args.algo, args.out) == (path, episodes, "ppo", folder)
+    assert args.init_from is None
+    assert (args.log_std_init, args.scaled_observation, args.timeout_terminal) == (-2.0, True, True)
