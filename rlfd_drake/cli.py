@@ -408,7 +408,13 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     numbers = sorted(TABLES) if args.table == "all" else [args.table]
     for number in numbers:
-        reproduce_table(number, budget=args.budget, seed=args.seed, workers=args.workers)
+        reproduce_table(
+            number,
+            budget=args.budget,
+            seed=args.seed,
+            workers=args.workers,
+            training_seeds=tuple(args.training_seeds),
+        )
     return 0
 
 
@@ -899,7 +905,15 @@ def build_parser() -> argparse.ArgumentParser:
         default="all",
     )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
-    reproduce.add_argument("--seed", type=int, default=0)
+    reproduce.add_argument("--seed", type=int, default=0, help="evaluation seed")
+    reproduce.add_argument(
+        "--training-seeds",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="rows of `rlfd train` policies over these training seeds (mean +- std; "
+        "runs/<folder>_s<seed>); writes results/table_<n>_training_seeds_<seeds>",
+    )
     reproduce.add_argument("--workers", type=int, default=2)
     reproduce.set_defaults(func=_cmd_reproduce)
 

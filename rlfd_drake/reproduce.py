@@ -29,6 +29,13 @@ transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the
 and the commands); a missing one is listed as "not run" with the command that trains it,
 since each takes 5-45 minutes on 2 cores.
 
+Training seeds: every run in ``RUNS`` trains with seed 0; ``--training-seeds 0 1 2``
+reports each "run:" row as the mean +- sample std over those seeds' runs
+(``seeded_run``: ``runs/<folder>_s<seed>``, a later stage from the same seed's earlier
+one), from the runs here or their stored evaluations, into
+``results/table_<n>_training_seeds_0_1_2.*``; a seed not trained is listed with its
+command. Baselines and named policies stay one training.
+
 Budgets: ``quick`` trains each episodic baseline for 100 episodes and evaluates 40
 starts per task (about an hour on 2 cores for tables 1, 2 and 4); ``paper`` uses 500
 training episodes (the paper: 8000 for eNAC/FDG/PoWER, cut to what fits in a working
@@ -40,6 +47,7 @@ reason, never left out.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -49,10 +57,17 @@ from rlfd_drake.paths import (
     SHIPPED_PPO_POLICY,
     models_dir,
 )
-from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.results import results_dir, spread_over_seeds, write_result
 from rlfd_drake.run_log import run_log_file
 
-__all__ = ["BUDGETS", "TABLES", "Row", "reproduce_table", "stored_or_new_evaluation"]
+__all__ = [
+    "BUDGETS",
+    "TABLES",
+    "Row",
+    "reproduce_table",
+    "seeded_run",
+    "stored_or_new_evaluation",
+]
 
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
@@ -133,6 +148,25 @@ def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sa
         f"--out {folder}",
     ]
     return folder, " ".join(p for p in parts if p)
+
+
+def _check_training_seed(training_seed: int) -> None:
+    if isinstance(training_seed, bool) or not isinstance(training_seed, int) or training_seed < 0:
+        raise ValueError(f"training_seed must be an integer >= 0, got {training_seed!r}")
+
+
+def seeded_run(run: tuple[str, str], training_seed: int) -> tuple[str, str]:
+    """A RUNS entry (folder, command), all of which train with seed 0, as trained with
+    ``training_seed``: ``--seed 0`` becomes ``--seed <s>`` and every run folder's ``_s0``
+    (its own and an ``--init-from`` one's) ``_s<s>``, so a later stage or a transfer
+    starts from the same seed's policy."""
+    _check_training_seed(training_seed)
+    folder, command = run
+    if training_seed == 0:
+        return run
+    suffix = f"_s{training_seed}"
+    command = re.sub(r"_s0\b", suffix, command).replace(" --seed 0 ", f" --seed {training_seed} ")
+    return re.sub(r"_s0\b", suffix, folder), command
 
 
 #: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
@@ -1067,9 +1101,11 @@ def _cell(
     workers: int,
     metric: str = "success",
     evaluation_episodes: int | None = None,
+    training_seed: int = 0,
 ) -> tuple[dict, dict | None]:
     """The table cell of ``row`` on ``task`` and the evaluation it reports (None
-    when not run); ``evaluation_episodes`` overrides the budget's starts."""
+    when not run); ``evaluation_episodes`` overrides the budget's starts and
+    ``training_seed`` picks a "run:" row's run (``seeded_run``)."""
     from rlfd_drake.evaluate import NAMED_POLICIES, policy_stem, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
@@ -1087,7 +1123,7 @@ def _cell(
     elif kind == "run":
         if task not in RUNS[detail]:
             return {"status": "not run", "reason": f"no {detail} run on {task}"}, None
-        folder, command = RUNS[detail][task]
+        folder, command = seeded_run(RUNS[detail][task], training_seed)
         run = Path(folder)
         if row.checkpoint is None:
             trained, policy = _trained_episodes(run), str(run / "policy.zip")
@@ -1156,6 +1192,74 @@ def _cell(
     return cell, result
 
 
+#: Cell figures averaged over training seeds (None where no seed has the figure).
+_FIGURES_OVER_SEEDS = (
+    "insertion_time_s",
+    "peak_force_n",
+    "peak_joint_contact_torque_nm",
+    "peak_low_passed_force_n",
+)
+
+
+def _mean_or_none(values: list[float | None]) -> float | None:
+    present = [v for v in values if v is not None]
+    return spread_over_seeds(present)["mean"] if present else None
+
+
+def _cell_over_seeds(
+    row: Row,
+    task: str,
+    budget: str,
+    seed: int,
+    workers: int,
+    metric: str,
+    evaluation_episodes: int | None,
+    training_seeds: tuple[int, ...],
+) -> tuple[dict, dict | None]:
+    """``_cell`` for each training seed of a "run:" row (other rows: one cell, as they
+    are trained once), and, with several seeds, one cell with the mean over the seeds
+    measured: success +- its sample std over seeds, the other figures' means, each
+    seed's cell under "per_seed" and the seeds not run under "missing_seeds". The
+    evaluation returned (for the figure) is the first measured seed's."""
+    if not row.source.startswith("run:"):
+        return _cell(row, task, budget, seed, workers, metric, evaluation_episodes)
+    per_seed = {
+        s: _cell(row, task, budget, seed, workers, metric, evaluation_episodes, s)
+        for s in training_seeds
+    }
+    if len(training_seeds) == 1:
+        return per_seed[training_seeds[0]]
+    measured = {s: cell for s, (cell, _) in per_seed.items() if cell["status"] == "measured"}
+    missing = {s: cell["reason"] for s, (cell, _) in per_seed.items() if s not in measured}
+    if not measured:
+        reasons = "; ".join(dict.fromkeys(missing.values()))
+        return {"status": "not run", "reason": reasons, "missing_seeds": missing}, None
+    cells = list(measured.values())
+    success = spread_over_seeds([c["success_pct"] for c in cells])
+    outcomes = dict.fromkeys(o for c in cells for o in c["peak_force_by_outcome_n"])
+    # The recipe's episode count: the seeds whose logs are here agree on it.
+    episodes = {c["training_episodes"] for c in cells} - {None}
+    cell = {
+        "status": "measured",
+        "success_pct": success["mean"],
+        # One seed measured: its own spread over the grid's bins, as a one-seed table.
+        "success_std_pct": cells[0]["success_std_pct"]
+        if success["std"] is None
+        else success["std"],
+        **{key: _mean_or_none([c[key] for c in cells]) for key in _FIGURES_OVER_SEEDS},
+        "peak_force_by_outcome_n": {
+            o: _mean_or_none([c["peak_force_by_outcome_n"].get(o) for c in cells]) for o in outcomes
+        },
+        "evaluation_episodes": cells[0]["evaluation_episodes"],
+        "training_episodes": episodes.pop() if len(episodes) == 1 else None,
+        "training_seeds": sorted(measured),
+        "seeds_asked": len(training_seeds),
+        "per_seed": {str(s): c for s, c in measured.items()},
+        "missing_seeds": {str(s): reason for s, reason in missing.items()},
+    }
+    return cell, per_seed[min(measured)][1]
+
+
 _METRIC_TEXT = {
     "success": "Success %, ours = mean +- std (over bins where the grid has several, else "
     "binomial)",
@@ -1176,6 +1280,14 @@ _METRIC_KEYS = {
 
 
 def _format_metric(cell: dict, metric: str) -> str:
+    """The cell's figure; a mean over training seeds says over how many of those asked."""
+    seeds = ""
+    if "training_seeds" in cell:
+        seeds = f" ({len(cell['training_seeds'])} of {cell['seeds_asked']} seeds)"
+    return _format_figure(cell, metric) + seeds
+
+
+def _format_figure(cell: dict, metric: str) -> str:
     if metric == "success":
         return f"{cell['success_pct']:.1f} +- {cell['success_std_pct']:.1f}"
     if metric == "insertion_time":
@@ -1197,7 +1309,13 @@ def _fmt_or_na(value: float | None, spec: str, unit: str = "") -> str:
     return "n/a" if value is None else f"{value:{spec}}{unit}"
 
 
-def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed: int) -> str:
+def _markdown(
+    table: Table,
+    cells: dict[str, dict[str, dict]],
+    budget: str,
+    seed: int,
+    training_seeds: tuple[int, ...] = (0,),
+) -> str:
     columns = list(table.columns)
     header = (
         "| model | "
@@ -1208,6 +1326,7 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
         f"# {table.title}",
         "",
         f"{_METRIC_TEXT[table.metric]} on this simulator (budget `{budget}`, seed {seed}). "
+        + _seeds_text(training_seeds)
         + table.note,
         "",
         header,
@@ -1230,14 +1349,31 @@ def _markdown(table: Table, cells: dict[str, dict[str, dict]], budget: str, seed
         parts.append("/".join(dict.fromkeys(trained)) or "n/a")
         lines.append("| " + " | ".join(parts) + " |")
     reasons = {
-        cell["reason"]
+        reason
         for row_cells in cells.values()
         for cell in row_cells.values()
-        if cell["status"] == "not run"
+        for reason in (
+            [cell["reason"]]
+            if cell["status"] == "not run"
+            else cell.get("missing_seeds", {}).values()
+        )
     }
     if reasons:
         lines += ["", "Not run: " + "; ".join(sorted(reasons)) + "."]
     return "\n".join(lines) + "\n"
+
+
+def _seeds_text(training_seeds: tuple[int, ...]) -> str:
+    """What the training seeds mean for the rows, when more than seed 0 is asked."""
+    if training_seeds == (0,):
+        return ""
+    listed = ", ".join(str(s) for s in training_seeds)
+    return (
+        f"Rows of policies trained by `rlfd train` are over training seeds {listed}: the "
+        "mean +- sample std (ddof 1) of the seeds measured (each seed's cell in the "
+        "JSON; one seed measured: its spread over bins), the other rows one training; "
+        "the figure shows the first measured seed. "
+    )
 
 
 def _plot(table: Table, evaluations: dict[str, dict[str, dict | None]], path: Path) -> Path | None:
@@ -1262,38 +1398,76 @@ def _plot(table: Table, evaluations: dict[str, dict[str, dict | None]], path: Pa
     return draw(panels, path)
 
 
-def reproduce_table(number: str, budget: str = "quick", seed: int = 0, workers: int = 2) -> dict:
-    """Measures every runnable cell of table ``number``; writes
-    results/table_<n>.{md,json,png} (the figure: see ``_plot``)."""
+def table_name(number: str, training_seeds: tuple[int, ...] = (0,)) -> str:
+    """The result name of table ``number``: table_<n>, or table_<n>_training_seeds_<s>_..
+    over other training seeds than seed 0 alone (so the seed-0 table is kept)."""
+    if training_seeds == (0,):
+        return f"table_{number}"
+    return f"table_{number}_training_seeds_" + "_".join(str(s) for s in training_seeds)
+
+
+def _check_training_seeds(training_seeds: tuple[int, ...]) -> tuple[int, ...]:
+    seeds = tuple(training_seeds)
+    if not seeds:
+        raise ValueError("training_seeds must name at least one seed, got none")
+    for s in seeds:
+        _check_training_seed(s)
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"training_seeds must not repeat a seed, got {list(seeds)}")
+    return seeds
+
+
+def reproduce_table(
+    number: str,
+    budget: str = "quick",
+    seed: int = 0,
+    workers: int = 2,
+    training_seeds: tuple[int, ...] = (0,),
+) -> dict:
+    """Measures every runnable cell of table ``number``, "run:" rows over
+    ``training_seeds`` (``_cell_over_seeds``); writes results/<table_name>.{md,json,png}
+    (the figure: see ``_plot``)."""
     if number not in TABLES:
         raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
     if budget not in BUDGETS:
         raise ValueError(f"budget must be one of {sorted(BUDGETS)}, got {budget!r}")
+    training_seeds = _check_training_seeds(training_seeds)
     table = TABLES[number]
+    name = table_name(number, training_seeds)
     print(f"{table.title} (budget {budget})", flush=True)
     measured = {
         row.label: {
-            column: _cell(row, task, budget, seed, workers, table.metric, table.evaluation_episodes)
+            column: _cell_over_seeds(
+                row,
+                task,
+                budget,
+                seed,
+                workers,
+                table.metric,
+                table.evaluation_episodes,
+                training_seeds,
+            )
             for column, task in table.columns.items()
         }
         for row in table.rows
     }
     cells = {label: {c: cell for c, (cell, _) in row.items()} for label, row in measured.items()}
     evaluations = {label: {c: r for c, (_, r) in row.items()} for label, row in measured.items()}
-    markdown = _markdown(table, cells, budget, seed)
-    plot = _plot(table, evaluations, results_dir() / f"table_{number}.png")
+    markdown = _markdown(table, cells, budget, seed, training_seeds)
+    plot = _plot(table, evaluations, results_dir() / f"{name}.png")
     if plot is not None:
         markdown += f"\n![{table.title}]({plot.name})\n"
-    (results_dir() / f"table_{number}.md").write_text(markdown)
+    (results_dir() / f"{name}.md").write_text(markdown)
     data = {
         "title": table.title,
         "budget": budget,
+        "training_seeds": list(training_seeds),
         "columns": table.columns,
         "rows": [
             {"label": row.label, "source": row.source, "paper": row.paper, "ours": cells[row.label]}
             for row in table.rows
         ],
     }
-    write_result(f"table_{number}", data, seed=seed)
+    write_result(name, data, seed=seed)
     print(markdown, flush=True)
     return json.loads(json.dumps(data))

@@ -189,3 +189,22 @@ def compact_png(path: str | Path, colors: int = 64) -> Path:
         palette = image.convert("RGB").quantize(colors=colors)
     palette.save(path, format="PNG", optimize=True)
     return path
+
+
+def spread_over_seeds(values: list[float]) -> dict:
+    """Mean, sample standard deviation (ddof 1; None for one value), min and max of one
+    figure over training seeds."""
+    if not values:
+        raise ValueError("values must hold at least one seed's figure, got none")
+    return {
+        "mean": float(np.mean(values)),
+        "std": float(np.std(values, ddof=1)) if len(values) > 1 else None,
+        "min": float(np.min(values)),
+        "max": float(np.max(values)),
+    }
+
+
+def format_spread(spread: dict) -> str:
+    """``mean +- std`` of a ``spread_over_seeds`` (the mean alone for a single seed)."""
+    std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
+    return f"{spread['mean']:.1f}{std}"

@@ -21,11 +21,9 @@ import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-import numpy as np
-
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
-from rlfd_drake.results import results_dir, write_result
+from rlfd_drake.results import format_spread, results_dir, spread_over_seeds, write_result
 from rlfd_drake.run_log import run_log_folders
 from rlfd_drake.train import TrainConfig
 
@@ -128,21 +126,6 @@ def _column_label(column: str) -> str:
     """A column "<task>/<actions>" as "<task name>, <actions>" (a YAML by its stem)."""
     task, _, label = column.rpartition("/")
     return f"{Path(task).stem}, {label}"
-
-
-def _spread(values: list[float]) -> dict:
-    return {
-        "mean": float(np.mean(values)),
-        "std": float(np.std(values, ddof=1)) if len(values) > 1 else None,
-        "min": float(np.min(values)),
-        "max": float(np.max(values)),
-    }
-
-
-def format_spread(spread: dict) -> str:
-    """``mean +- std`` of a ``_spread`` (the mean alone for a single seed)."""
-    std = f" +- {spread['std']:.1f}" if spread["std"] is not None else ""
-    return f"{spread['mean']:.1f}{std}"
 
 
 def seed_study(
@@ -248,9 +231,10 @@ def seed_study(
         "targets": targets,
         "per_seed": per_seed,
         "over_seeds": {
-            column: _spread([row["success"][column] for row in per_seed]) for column in columns
+            column: spread_over_seeds([row["success"][column] for row in per_seed])
+            for column in columns
         },
-        "training_wall_time_s": _spread(walls) if walls else None,
+        "training_wall_time_s": spread_over_seeds(walls) if walls else None,
         "seeds_meeting_targets": sum(row["meets_targets"] for row in per_seed) if targets else None,
     }
     write_result(f"seeds_{name}", data, seed=seed)

@@ -587,3 +587,75 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
     assert (args.task, args.episodes, args.algo, args.out) == (path, episodes, "ppo", folder)
     assert args.init_from is None
     assert (args.log_std_init, args.scaled_observation, args.timeout_terminal) == (-2.0, True, True)
+
+
+def test_a_seeded_run_trains_with_its_seed_from_the_same_seeds_earlier_stage():
+    """Every RUNS entry trains with seed 0; seeded_run gives seed 2's: its own folder and
+    the --init-from stage it starts from both end in _s2, and rlfd parses the command."""
+    from rlfd_drake.cli import build_parser
+
+    gear = "models/tasks/variants/gear_incremental.yaml"
+    run = reproduce.RUNS["rlfd_ppo_incremental_1400"][gear]
+    assert reproduce.seeded_run(run, 0) == run
+    folder, command = reproduce.seeded_run(run, 2)
+    assert folder == run[0].removesuffix("_s0") + "_s2"
+    args = build_parser().parse_args(command.split()[1:])
+    assert (args.seed, args.out) == (2, folder)
+    first_stage = reproduce.RUNS["rlfd_ppo_incremental"][gear][0]
+    assert args.init_from == first_stage.removesuffix("_s0") + "_s2/policy.zip"
+    for bad in (-1, True, 1.5):
+        with pytest.raises(ValueError, match="training_seed"):
+            reproduce.seeded_run(run, bad)
+
+
+def test_a_table_over_training_seeds_reports_the_seeds_mean_and_spread(tmp_path, monkeypatch):
+    """With training seeds 0-2 a run row is the mean +- sample std of the seeds whose
+    policy is here (a missing seed is listed with the command that trains it); other
+    rows are trained once; the seed-0 table is not overwritten."""
+    import re
+
+    monkeypatch.chdir(tmp_path)
+    peg = "models/tasks/variants/peg_incremental.yaml"
+    folder = reproduce.RUNS["rlfd_ppo_incremental_lrlin"][peg][0].removesuffix("_s0")
+    for seed in (0, 1):
+        run = tmp_path / f"{folder}_s{seed}"
+        run.mkdir(parents=True)
+        (run / "policy.zip").write_bytes(b"")
+        if seed == 0:  # seed 1's log is elsewhere: the recipe's count is seed 0's
+            (run / "metrics.json").write_text(json.dumps({"episodes": 700}))
+    rates = {"0": 0.98, "1": 0.96}
+
+    def seeded_evaluation(task, policy, name, *args, **kwargs):
+        result = _fake_evaluation(task, policy, name, *args, **kwargs)
+        trained = re.search(r"lrlin_e700_s(\d)/policy.zip", policy)
+        if result is not None and trained:
+            result["success_rate"] = rates[trained.group(1)]
+            result["peak_force_n"] = 100.0 + 10 * int(trained.group(1))
+        return result
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", seeded_evaluation)
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "table_incremental.md").write_text("seed 0's table\n")
+    data = reproduce.reproduce_table("incremental", training_seeds=(0, 1, 2), workers=1)
+    rows = {row["label"]: row["ours"] for row in data["rows"]}
+    label = "PPO / PPO (rLfD), incremental, step size falling to 0, 700 episodes, mean action"
+    cell = rows[label]["peg"]
+    assert cell["success_pct"] == pytest.approx(97.0)
+    assert cell["success_std_pct"] == pytest.approx(2**0.5)
+    assert cell["peak_force_n"] == pytest.approx(105.0)
+    assert cell["training_seeds"] == [0, 1]
+    assert cell["training_episodes"] == 700
+    assert "--seed 2 " in cell["missing_seeds"]["2"]
+    assert f"{folder}_s2" in cell["missing_seeds"]["2"]
+    assert "training_seeds" not in rows["None / None (DMP alone)"]["peg"]
+    markdown = (tmp_path / "results" / "table_incremental_training_seeds_0_1_2.md").read_text()
+    assert "97.0 +- 1.4 (2 of 3 seeds)" in markdown
+    assert "training seeds 0, 1, 2" in markdown
+    assert "--seed 2 " in markdown.split("Not run:")[1]
+    assert (tmp_path / "results" / "table_incremental.md").read_text() == "seed 0's table\n"
+
+
+@pytest.mark.parametrize("seeds", [(), (0, 0), (-1,), (0, "1")])
+def test_reproduce_refuses_bad_training_seeds(seeds):
+    with pytest.raises(ValueError, match="training_seed"):
+        reproduce.reproduce_table("incremental", training_seeds=seeds)
