@@ -21,9 +21,10 @@ of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`
 residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush`` (the
 same whose residual may not push down), ``incremental_push2mm`` /
 ``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
-``6_wrist_smooth`` and ``6_incremental`` (Table VI between those variants of gear and
-RJ-45), ``rj45_imitation`` (RJ-45 with PPO started from a copy of the force-guided
-search); 5 and the force tables reuse the other tables' evaluations.
+``6_wrist_smooth``, ``6_incremental`` and ``6_incremental_nopush`` (Table VI between
+those variants of gear and RJ-45), ``rj45_imitation`` (RJ-45 with PPO started from a
+copy of the force-guided search); 5 and the force tables reuse the other tables'
+evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -351,11 +352,15 @@ _TRANSFER_INCREMENTAL = {
 }
 
 
-def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
-    """RUNS["ppo_full" + suffix] (700 episodes on each of ``variants``' gear and rj45),
-    ["ppo_source_as_is" + suffix], ["ppo_scratch_60" + suffix] and
-    ["ppo_from_source_60" + suffix]: Table VI's PPO rows between them."""
-    full = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
+def _add_ppo_transfer_runs(
+    suffix: str, variants: dict[str, str], full: dict[str, tuple[str, str]] | None = None
+) -> None:
+    """RUNS["ppo_full" + suffix] (``full``, path -> run; default: section 8's recipe for
+    700 episodes on each of ``variants``' gear and rj45), ["ppo_source_as_is" + suffix],
+    ["ppo_scratch_60" + suffix] and ["ppo_from_source_60" + suffix]: Table VI's PPO rows
+    between them."""
+    if full is None:
+        full = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
     RUNS[f"ppo_full{suffix}"] = full
     pairs = (("gear", "rj45"), ("rj45", "gear"))
     RUNS[f"ppo_source_as_is{suffix}"] = {
@@ -378,6 +383,30 @@ def _add_ppo_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
 
 
 _add_ppo_transfer_runs("_incremental", _TRANSFER_INCREMENTAL)
+# The same between the no-push variants (the DMP does all the pressing on both tasks, so a
+# copied residual brings no push of its own; section 12 found each task's push the other's
+# failure). Full training is section 15's one run of 1,400 episodes with the step size
+# falling to zero: results/full_pose_study.md, section 16.
+_TRANSFER_NOPUSH = {
+    "gear": _INCREMENTAL_NOPUSH["gear"],
+    "rj45": "models/tasks/variants/rj45_slow_insert_incremental_nopush.yaml",
+}
+_add_ppo_transfer_runs(
+    "_incremental_nopush",
+    _TRANSFER_NOPUSH,
+    full={
+        _TRANSFER_NOPUSH["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][
+            _TRANSFER_NOPUSH["gear"]
+        ],
+        _TRANSFER_NOPUSH["rj45"]: _run(
+            "runs/rj45_slow_insert_incremental_nopush_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
+            _TRANSFER_NOPUSH["rj45"],
+            1400,
+            f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
+            "ppo",
+        ),
+    },
+)
 # RJ-45 from a copy of the force-guided search: PPO's mean fitted to the rule's actions
 # on 200 training episodes (``rlfd train --imitate``), then section 8's RJ-45 recipe for
 # 700 episodes and 700 more from that policy. results/rj45_study.md, last section.
@@ -959,6 +988,29 @@ TABLES["6_incremental"] = Table(
     "source does (its torque scale is part of the copied networks). 60 episodes are 4-5 "
     "PPO updates here (the paper: 3). A residual of 1 is 1 cm / 5 deg on "
     "gear and 3 mm / 3 deg on RJ-45, so a copied policy's moves change size. The "
+    "paper's DMP row is Table IV's; its other columns are its physical robot.",
+)
+
+TABLES["6_incremental_nopush"] = Table(
+    "Table VI between the no-push incremental variants of gear and RJ-45 (full-pose PPO)",
+    {"gear": _TRANSFER_NOPUSH["gear"], "rj45": _TRANSFER_NOPUSH["rj45"]},
+    [
+        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
+        *_transfer_rows(
+            "PPO, incremental, no push",
+            "ppo_full_incremental_nopush",
+            "_incremental_nopush",
+            algo="ppo",
+        ),
+    ],
+    "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
+    "rj45_slow_insert_incremental_nopush.yaml: the residual action is a rate and its "
+    "offset may not move the part below the DMP's path, so the DMP does all the pressing "
+    "on both tasks. Full training is one run of 1,400 episodes with the step size falling "
+    "to zero (section 8's PPO recipe, RJ-45 with its contact-torque scale 0.05 N m and "
+    "force-limit penalty 1); the 60-episode fine-tunes keep a constant step, start from "
+    "the source's networks with a new optimiser and read the observation as the source "
+    "does. A residual of 1 is 1 cm / 5 deg on gear and 3 mm / 3 deg on RJ-45. The "
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
 

@@ -241,12 +241,14 @@ def test_incremental_variants_change_only_the_residual_rate():
 
 
 def test_push_bounded_incremental_variants_change_only_the_push_bound():
-    """peg's and gear's no-push incremental variants (the DMP does all the pressing) and
-    peg's 2 mm one are their incremental variants with a bound on the residual's push."""
+    """peg's, gear's and slow RJ-45's no-push incremental variants (the DMP does all the
+    pressing) and peg's 2 mm one are their incremental variants with a bound on the
+    residual's push."""
     variants = tasks_dir() / "variants"
     for name, suffix, bound in (
         ("peg_incremental", "nopush", 0.0),
         ("gear_incremental", "nopush", 0.0),
+        ("rj45_slow_insert_incremental", "nopush", 0.0),
         ("peg_incremental", "push2mm", 0.002),
     ):
         incremental = load_task(variants / f"{name}.yaml", check_demo=False)
