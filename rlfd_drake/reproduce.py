@@ -1258,6 +1258,15 @@ def _mean_or_none(values: list[float | None]) -> float | None:
     return spread_over_seeds(present)["mean"] if present else None
 
 
+def _episodes_over_seeds(episodes: set[int]) -> int | str | None:
+    """The training episodes of a row's seeds: the count they share, "min-max" where they
+    differ, None where no seed's log is here."""
+    if not episodes:
+        return None
+    low, high = min(episodes), max(episodes)
+    return low if low == high else f"{low}-{high}"
+
+
 def _cell_over_seeds(
     row: Row,
     task: str,
@@ -1303,7 +1312,8 @@ def _cell_over_seeds(
             o: _mean_or_none([c["peak_force_by_outcome_n"].get(o) for c in cells]) for o in outcomes
         },
         "evaluation_episodes": cells[0]["evaluation_episodes"],
-        "training_episodes": episodes.pop() if len(episodes) == 1 else None,
+        # Two env processes may end a run an episode past its count (700 and 701).
+        "training_episodes": _episodes_over_seeds(episodes),
         "training_seeds": sorted(measured),
         "seeds_asked": len(training_seeds),
         "per_seed": {str(s): c for s, c in measured.items()},

@@ -662,7 +662,12 @@ def test_a_table_over_training_seeds_reports_the_seeds_mean_and_spread(tmp_path,
         (run / "policy.zip").write_bytes(b"")
         if seed == 0:  # seed 1's log is elsewhere: the recipe's count is seed 0's
             (run / "metrics.json").write_text(json.dumps({"episodes": 700}))
-    rates = {"0": 0.98, "1": 0.96}
+    for seed, episodes in ((3, 700), (4, 701)):  # two env processes may overshoot by one
+        run = tmp_path / f"{folder}_s{seed}"
+        run.mkdir(parents=True)
+        (run / "policy.zip").write_bytes(b"")
+        (run / "metrics.json").write_text(json.dumps({"episodes": episodes}))
+    rates = {"0": 0.98, "1": 0.96, "3": 0.9, "4": 0.9}
 
     def seeded_evaluation(task, policy, name, *args, **kwargs):
         result = _fake_evaluation(task, policy, name, *args, **kwargs)
@@ -684,6 +689,9 @@ def test_a_table_over_training_seeds_reports_the_seeds_mean_and_spread(tmp_path,
     assert cell["peak_force_n"] == pytest.approx(105.0)
     assert cell["training_seeds"] == [0, 1]
     assert cell["training_episodes"] == 700
+    both = reproduce.reproduce_table("incremental", training_seeds=(3, 4), workers=1)
+    overshoot = next(row for row in both["rows"] if row["label"] == label)["ours"]["peg"]
+    assert overshoot["training_episodes"] == "700-701"
     assert "--seed 2 " in cell["missing_seeds"]["2"]
     assert f"{folder}_s2" in cell["missing_seeds"]["2"]
     assert "training_seeds" not in rows["None / None (DMP alone)"]["peg"]
