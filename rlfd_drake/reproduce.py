@@ -433,6 +433,18 @@ def _add_imitation_runs(tasks: tuple[str, ...]) -> None:
 
 
 _add_imitation_runs((_RJ45_SLOW_INSERT, "rj45"))
+# The same recipe on the shipped rj45 in one run of 1,400 episodes whose step size falls
+# linearly to zero (section 15 of results/full_pose_study.md steadied peg and gear so):
+# results/rj45_study.md, last section.
+RUNS["ppo_imitate_fs_lrlin_1400"] = {
+    "rj45": _run(
+        "runs/rj45_ppo_std2_imitate_fs_torque005_pen1_tt_lrlin_e1400_s0",
+        "rj45",
+        1400,
+        f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} {_IMITATION_FLAGS}",
+        "ppo",
+    )
+}
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -1032,13 +1044,20 @@ TABLES["rj45_imitation"] = Table(
         ),
         Row("PPO from the copy, 700 episodes", "run:ppo_imitate_fs", _PAPER_RJ45_RLFD),
         Row("PPO from the copy, 1,400 episodes", "run:ppo_imitate_fs_1400", _PAPER_RJ45_RLFD),
+        Row(
+            "PPO from the copy, 1,400 episodes in one run, step size falling to zero",
+            "run:ppo_imitate_fs_lrlin_1400",
+            _PAPER_RJ45_RLFD,
+        ),
     ],
     "Before RL, PPO's mean is fitted to the actions of the force-guided search on 200 "
     "training episodes and its value to their discounted returns (rlfd train --imitate "
     "force_search --imitation-episodes 200); then section 8's RJ-45 recipe (log std -2, "
     "scaled observation with a 0.05 N m torque scale, force-limit penalty 1, time limit "
-    "terminal) for 700 episodes, and 700 more from that policy (--init-from). At run time "
-    "the network acts alone. Columns: models/tasks/variants/rj45_slow_insert.yaml (the "
+    "terminal) for 700 episodes, and 700 more from that policy (--init-from); the last "
+    "row instead trains 1,400 episodes in one run with the step size falling linearly to "
+    "zero (--learning-rate-schedule linear; shipped rj45 only). At run time the network "
+    "acts alone. Columns: models/tasks/variants/rj45_slow_insert.yaml (the "
     "slow demonstration) and the shipped rj45. All 160 starts of RJ-45's grid, whatever "
     "the budget; training seed 0 (other seeds: results/seeds_*imitate*.md). The paper's "
     "figures are its physical robot (Table IV: DMP 0 %, PPO / PPO 70.6 %); its rLfD starts "

@@ -588,7 +588,7 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
     assert f"eval_rj45_slow_insert_{stem}_policy_0_steps_n160_s0" in names
     assert f"eval_rj45_slow_insert_{stem}_n160_s0" in names
     rows = {row["label"]: row["ours"]["rj45 slow insert"] for row in data["rows"]}
-    trained = [rows[label]["training_episodes"] for label in list(rows)[2:]]
+    trained = [rows[label]["training_episodes"] for label in list(rows)[2:5]]
     assert trained == [0, 700, 1400]
     row = next(
         line
@@ -600,6 +600,10 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
     shipped = next(r for r in data["rows"] if r["label"].endswith("1,400 episodes"))["ours"]
     assert shipped["rj45"]["status"] == "not run"
     assert "--task rj45 " in shipped["rj45"]["reason"]
+    # The one-run falling-step row is on the shipped task only.
+    one_run = next(r for r in data["rows"] if r["label"].endswith("falling to zero"))["ours"]
+    assert one_run["rj45 slow insert"]["status"] == "not run"
+    assert "no ppo_imitate_fs_lrlin_1400 run" in one_run["rj45 slow insert"]["reason"]
 
 
 @pytest.mark.parametrize(
@@ -611,6 +615,7 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
             "models/tasks/variants/gear_incremental_nopush.yaml",
             1400,
         ),
+        ("ppo_imitate_fs_lrlin_1400", "rj45", 1400),
     ],
 )
 def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
