@@ -414,13 +414,18 @@ _RJ45_SLOW_INSERT = "models/tasks/variants/rj45_slow_insert.yaml"
 _IMITATION_FLAGS = "--imitate force_search --imitation-episodes 200"
 
 
+def _imitation_folder(path: str) -> str:
+    """The run folder prefix of RJ-45's imitation recipe on task ``path``."""
+    return f"runs/{Path(path).stem}_ppo_std2_imitate_fs_torque005_pen1_tt"
+
+
 def _add_imitation_runs(tasks: tuple[str, ...]) -> None:
     """RUNS["ppo_imitate_fs"] (the copy of the search, then 700 PPO episodes) and
     RUNS["ppo_imitate_fs_1400"] (700 more from it) on each RJ-45 task path."""
     flags = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA['rj45']}"
     RUNS["ppo_imitate_fs"], RUNS["ppo_imitate_fs_1400"] = {}, {}
     for path in tasks:
-        folder = f"runs/{Path(path).stem}_ppo_std2_imitate_fs_torque005_pen1_tt"
+        folder = _imitation_folder(path)
         first = _run(f"{folder}_e700_s0", path, 700, f"{flags} {_IMITATION_FLAGS}", "ppo")
         RUNS["ppo_imitate_fs"][path] = first
         RUNS["ppo_imitate_fs_1400"][path] = _run(
@@ -438,7 +443,7 @@ _add_imitation_runs((_RJ45_SLOW_INSERT, "rj45"))
 # results/rj45_study.md, last section.
 RUNS["ppo_imitate_fs_lrlin_1400"] = {
     "rj45": _run(
-        "runs/rj45_ppo_std2_imitate_fs_torque005_pen1_tt_lrlin_e1400_s0",
+        f"{_imitation_folder('rj45')}_lrlin_e1400_s0",
         "rj45",
         1400,
         f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} {_IMITATION_FLAGS}",
