@@ -615,6 +615,11 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
             "models/tasks/variants/gear_incremental_nopush.yaml",
             1400,
         ),
+        (
+            "rlfd_ppo_incremental_nopush_lrlin_2100",
+            "models/tasks/variants/gear_incremental_nopush.yaml",
+            2100,
+        ),
         ("ppo_imitate_fs_lrlin_1400", "rj45", 1400),
     ],
 )
