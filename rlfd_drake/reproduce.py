@@ -320,26 +320,21 @@ _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second
 # The same recipes in one run whose step size falls linearly to zero over its episodes
 # (peg: 700 pushing, gear: 1,400 not pushing): results/full_pose_study.md, section 15.
 _LINEAR_LR_FLAGS = f"{_PPO_STD2_FLAGS} --learning-rate-schedule linear"
-RUNS["rlfd_ppo_incremental_lrlin"] = {
-    _INCREMENTAL["peg"]: _run(
-        "runs/peg_incremental_ppo_std2_so_tt_lrlin_e700_s0",
-        _INCREMENTAL["peg"],
-        700,
-        _LINEAR_LR_FLAGS,
-        "ppo",
-    )
-}
+
+
+def _linear_lr_run(path: str, episodes: int) -> tuple[str, str]:
+    """One run of section 8's PPO recipe on task ``path`` with the step size falling to
+    zero over ``episodes``."""
+    folder = f"runs/{Path(path).stem}_ppo_std2_so_tt_lrlin_e{episodes}_s0"
+    return _run(folder, path, episodes, _LINEAR_LR_FLAGS, "ppo")
+
+
+RUNS["rlfd_ppo_incremental_lrlin"] = {_INCREMENTAL["peg"]: _linear_lr_run(_INCREMENTAL["peg"], 700)}
 # Gear's one run is also trained half as long again (2,100 episodes; section 17): its
 # training success was still rising at 1,400 and most failures are the 2-3 mm fixtures.
-for _episodes in (1400, 2100):
-    RUNS[f"rlfd_ppo_incremental_nopush_lrlin_{_episodes}"] = {
-        _INCREMENTAL_NOPUSH["gear"]: _run(
-            f"runs/gear_incremental_nopush_ppo_std2_so_tt_lrlin_e{_episodes}_s0",
-            _INCREMENTAL_NOPUSH["gear"],
-            _episodes,
-            _LINEAR_LR_FLAGS,
-            "ppo",
-        )
+for _gear_episodes in (1400, 2100):
+    RUNS[f"rlfd_ppo_incremental_nopush_lrlin_{_gear_episodes}"] = {
+        _INCREMENTAL_NOPUSH["gear"]: _linear_lr_run(_INCREMENTAL_NOPUSH["gear"], _gear_episodes)
     }
 # Peg's incremental variant whose residual may push down at most 2 mm (4 N at the
 # controller's 2000 N/m). results/full_pose_study.md, section 11.
