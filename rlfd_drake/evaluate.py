@@ -20,6 +20,9 @@ Policies are named by a string, so that worker processes can build their own:
 * ``"<translation spec>|<orientation spec>"``: Table IV's "translation policy /
   orientation policy" rows, e.g. ``"runs/.../baseline.npz|random"`` (Linear / Random):
   each part is any residual spec above ("dmp" = no correction of that part).
+* ``"<a.zip>+<b.zip>[+...]"``: an ensemble of saved policies trained alike (same
+  residual mode, no base correction), acting with the mean of their mean actions
+  (``MeanOfPolicies``); e.g. three training seeds of one recipe.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from rlfd_drake.episode import (
 from rlfd_drake.policies import (
     RUN_SUBFOLDERS,
     DeployedPolicy,
+    MeanOfPolicies,
     check_noise_scale,
     check_residual_mode,
     load_sb3_model,
@@ -109,6 +113,28 @@ _MODEL_CACHE: dict[str, tuple[object, str | None]] = {}
 NAMED_POLICIES = ("dmp", "random", "force_search", "slope", "fixture_oracle")
 
 
+#: Joins the saved policies of an ensemble spec ("a.zip+b.zip").
+ENSEMBLE_SEPARATOR = "+"
+
+
+def ensemble_members(policy_spec: str) -> list[str]:
+    """The saved policies of an ensemble spec, checked: two or more ``.zip`` files,
+    trained with one residual mode and without a base correction (so that their actions
+    are the same kind of residual and can be averaged)."""
+    members = policy_spec.split(ENSEMBLE_SEPARATOR)
+    if len(members) < 2 or not all(m.endswith(".zip") for m in members):
+        raise ValueError(
+            f"an ensemble is two or more saved policies 'a.zip+b.zip', got {policy_spec!r}"
+        )
+    modes = {trained_residual_mode(policy_file(m)) or "full" for m in members}
+    if len(modes) > 1:
+        raise ValueError(f"an ensemble's policies were trained with residual modes {sorted(modes)}")
+    corrected = [m for m in members if trained_base_correction(policy_file(m)) is not None]
+    if corrected:
+        raise ValueError(f"an ensemble cannot average policies trained on a rule: {corrected}")
+    return members
+
+
 def make_policy(
     policy_spec: str,
     residual_mode: str = "full",
@@ -150,6 +176,14 @@ def make_policy(
                 fixture_dq,
             ),
         )
+    if ENSEMBLE_SEPARATOR in policy_spec:
+        members = ensemble_members(policy_spec)
+        if not deterministic:
+            raise ValueError(
+                f"an ensemble acts with its members' mean actions; sampled actions are not "
+                f"defined for it: {policy_spec!r}"
+            )
+        return MeanOfPolicies([make_policy(m, residual_mode, episode_seed) for m in members])
     if policy_spec == "dmp":
         return None
     if policy_spec.endswith(".npz"):
@@ -522,7 +556,12 @@ def evaluate(
     parts = policy_spec.split("|")
     part_modes = [residual_mode] if len(parts) == 1 else ["translation", "orientation"]
     for part, mode in zip(parts, part_modes, strict=False):
-        if part.endswith(".zip"):
+        if ENSEMBLE_SEPARATOR in part:
+            if not deterministic:  # here, not in a worker: a worker's error would respawn it
+                raise ValueError(f"an ensemble acts with its mean action only, got {part!r}")
+            for member in ensemble_members(part):
+                check_residual_mode(policy_file(member), mode)
+        elif part.endswith(".zip"):
             check_residual_mode(policy_file(part), mode)
     if noise_scale != 1.0:
         saved = [part for part in parts if part.endswith(".zip")]
@@ -857,6 +896,8 @@ def policy_stem(spec: str) -> str:
     file's stem; "a_and_b" for a translation|orientation split."""
     if "|" in spec:
         return "_and_".join(policy_stem(part) for part in spec.split("|"))
+    if ENSEMBLE_SEPARATOR in spec:
+        return "_plus_".join(policy_stem(part) for part in spec.split(ENSEMBLE_SEPARATOR))
     path = policy_file(spec)
     if path.name in ("policy.zip", "baseline.npz"):
         return path.parent.name
@@ -869,8 +910,8 @@ def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:
     """The residual mode the diagram runs ``policy_spec`` with: ``residual_mode``, or
     "full" for a policy trained on a base correction (it corrects its residual_mode
     part; the rule acts on the whole residual)."""
-    if "|" in policy_spec or not policy_spec.endswith(".zip"):
-        return residual_mode
+    if "|" in policy_spec or ENSEMBLE_SEPARATOR in policy_spec or not policy_spec.endswith(".zip"):
+        return residual_mode  # an ensemble's members have no base correction
     from rlfd_drake.base_correction import applied_residual_mode
 
     return applied_residual_mode(trained_base_correction(policy_file(policy_spec)), residual_mode)
@@ -879,6 +920,8 @@ def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:
 def trained_mode(policy_spec: str) -> str:
     """The residual mode a saved policy was trained with ("full" if unknown or not a
     single saved policy)."""
+    if ENSEMBLE_SEPARATOR in policy_spec and "|" not in policy_spec:
+        return trained_mode(ensemble_members(policy_spec)[0])  # one mode: checked there
     if "|" in policy_spec or not policy_spec.endswith(".zip"):
         return "full"
     return trained_residual_mode(policy_file(policy_spec)) or "full"

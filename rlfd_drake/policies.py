@@ -313,6 +313,28 @@ class DeployedPolicy:
         return np.clip(action, self.model.action_space.low, self.model.action_space.high)
 
 
+class MeanOfPolicies:
+    """Several residual policies acting as one: the mean of their actions.
+
+    An ensemble of training seeds' policies: one run's mean action fails some starts
+    that most other seeds insert (results/full_pose_study.md, section 18), and the mean
+    of their actions is a policy that can be run. Each member keeps its own observation
+    history; ``reset()`` resets them all.
+    """
+
+    def __init__(self, members: list):
+        if len(members) < 2:
+            raise ValueError(f"an ensemble needs at least 2 policies, got {len(members)}")
+        self.members = list(members)
+
+    def reset(self) -> None:
+        for member in self.members:
+            member.reset()
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return np.mean([member(observation) for member in self.members], axis=0)
+
+
 def check_noise_scale(noise_scale: float) -> None:
     """Raises a ValueError unless ``noise_scale`` is a finite number > 0."""
     if not (isinstance(noise_scale, int | float) and np.isfinite(noise_scale) and noise_scale > 0):

@@ -288,6 +288,53 @@ def test_noise_scale_is_validated(tmp_path):
         evaluate("peg_easy", str(path), 1, 0, workers=2, deterministic=False, noise_scale=0.5)
 
 
+def test_an_ensemble_spec_acts_with_the_mean_of_its_members_mean_actions(tmp_path):
+    """ "a.zip+b.zip" runs each saved policy with its own history and averages their mean
+    actions; its file stem names both; what cannot be averaged is refused by name."""
+    from stable_baselines3 import PPO
+
+    from rlfd_drake.evaluate import policy_stem, trained_mode
+    from rlfd_drake.policies import MeanOfPolicies
+
+    paths = []
+    for seed in (0, 1):
+        run = tmp_path / f"run_s{seed}"
+        run.mkdir()
+        PPO("MlpPolicy", _ResidualEnv(), device="cpu", seed=seed).save(run / "policy.zip")
+        (run / "config.json").write_text(json.dumps({"config": {"residual_mode": "full"}}))
+        paths.append(str(run / "policy.zip"))
+    spec = "+".join(paths)
+    policy = make_policy(spec)
+    assert isinstance(policy, MeanOfPolicies)
+    obs = np.linspace(-1, 1, OBSERVATION_SIZE).astype(np.float32)
+    members = [make_policy(path) for path in paths]
+    policy.reset()
+    expected = (members[0](obs) + members[1](obs)) / 2
+    assert not np.allclose(members[0](obs), members[1](obs))  # two different networks
+    np.testing.assert_allclose(policy(obs), expected, atol=1e-7)
+    assert policy_stem(spec) == "run_s0_plus_run_s1"
+    assert trained_mode(spec) == "full"
+
+    with pytest.raises(ValueError, match="at least 2 policies"):
+        MeanOfPolicies([members[0]])
+    with pytest.raises(ValueError, match="two or more saved policies"):
+        make_policy(f"{paths[0]}+random")
+    with pytest.raises(ValueError, match="mean actions"):
+        make_policy(spec, deterministic=False)
+    with pytest.raises(ValueError, match="mean action only"):  # before any worker starts
+        evaluate("peg_easy", spec, 1, 0, workers=2, deterministic=False)
+    (tmp_path / "run_s1" / "config.json").write_text(
+        json.dumps({"config": {"residual_mode": "translation"}})
+    )
+    with pytest.raises(ValueError, match="residual modes"):
+        make_policy(spec)
+    (tmp_path / "run_s1" / "config.json").write_text(
+        json.dumps({"config": {"residual_mode": "full", "base_correction": "force_search"}})
+    )
+    with pytest.raises(ValueError, match="trained on a rule"):
+        make_policy(spec)
+
+
 def test_split_spec_takes_translation_and_orientation_from_different_policies():
     """Table IV's "translation / orientation" rows, e.g. Linear / Random."""
     from rlfd_drake.baselines.split import SplitResidualPolicy
