@@ -117,10 +117,16 @@ NAMED_POLICIES = ("dmp", "random", "force_search", "slope", "fixture_oracle")
 ENSEMBLE_SEPARATOR = "+"
 
 
-def ensemble_members(policy_spec: str) -> list[str]:
+def ensemble_members(policy_spec: str, deterministic: bool = True) -> list[str]:
     """The saved policies of an ensemble spec, checked: two or more ``.zip`` files,
     trained with one residual mode and without a base correction (so that their actions
-    are the same kind of residual and can be averaged)."""
+    are the same kind of residual and can be averaged), run with their mean actions
+    (``deterministic``: sampling is not defined for an ensemble)."""
+    if not deterministic:
+        raise ValueError(
+            f"an ensemble acts with its members' mean actions; it has a mean action only, "
+            f"no sampled actions: {policy_spec!r}"
+        )
     members = policy_spec.split(ENSEMBLE_SEPARATOR)
     if len(members) < 2 or not all(m.endswith(".zip") for m in members):
         raise ValueError(
@@ -177,12 +183,7 @@ def make_policy(
             ),
         )
     if ENSEMBLE_SEPARATOR in policy_spec:
-        members = ensemble_members(policy_spec)
-        if not deterministic:
-            raise ValueError(
-                f"an ensemble acts with its members' mean actions; sampled actions are not "
-                f"defined for it: {policy_spec!r}"
-            )
+        members = ensemble_members(policy_spec, deterministic)
         return MeanOfPolicies([make_policy(m, residual_mode, episode_seed) for m in members])
     if policy_spec == "dmp":
         return None
@@ -557,9 +558,8 @@ def evaluate(
     part_modes = [residual_mode] if len(parts) == 1 else ["translation", "orientation"]
     for part, mode in zip(parts, part_modes, strict=False):
         if ENSEMBLE_SEPARATOR in part:
-            if not deterministic:  # here, not in a worker: a worker's error would respawn it
-                raise ValueError(f"an ensemble acts with its mean action only, got {part!r}")
-            for member in ensemble_members(part):
+            # Checked here, not in a worker: a worker's error would respawn it.
+            for member in ensemble_members(part, deterministic):
                 check_residual_mode(policy_file(member), mode)
         elif part.endswith(".zip"):
             check_residual_mode(policy_file(part), mode)
