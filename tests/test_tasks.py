@@ -272,3 +272,19 @@ def test_every_variant_loads_and_is_named_by_its_file():
         # (e.g. demos/rj45_slow_insert.csv).
         assert Path(variant.demo).stem.startswith(shipped.name), path
         assert evaluation_size(variant) == evaluation_size(shipped)
+
+
+def test_the_wide_error_training_variant_changes_only_the_fixture_position_error():
+    """peg_incremental_wide_error is a training distribution for policies evaluated on
+    peg_incremental: the same task with +-2.5 mm of unseen fixture position error."""
+    variants = tasks_dir() / "variants"
+    task = load_task(variants / "peg_incremental.yaml", check_demo=False)
+    wide = load_task(variants / "peg_incremental_wide_error.yaml", check_demo=False)
+    assert task.fixture_error.position_bound_m == (0.002, 0.002, 0.0)
+    assert wide.fixture_error.position_bound_m == (0.0025, 0.0025, 0.0)
+    narrowed = dataclasses.replace(
+        wide,
+        name=task.name,
+        fixture_error=dataclasses.replace(wide.fixture_error, position_bound_m=(0.002, 0.002, 0.0)),
+    )
+    assert narrowed == task
