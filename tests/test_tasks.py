@@ -274,17 +274,31 @@ def test_every_variant_loads_and_is_named_by_its_file():
         assert evaluation_size(variant) == evaluation_size(shipped)
 
 
-def test_the_wide_error_training_variant_changes_only_the_fixture_position_error():
-    """peg_incremental_wide_error is a training distribution for policies evaluated on
-    peg_incremental: the same task with +-2.5 mm of unseen fixture position error."""
-    variants = tasks_dir() / "variants"
-    task = load_task(variants / "peg_incremental.yaml", check_demo=False)
-    wide = load_task(variants / "peg_incremental_wide_error.yaml", check_demo=False)
-    assert task.fixture_error.position_bound_m == (0.002, 0.002, 0.0)
-    assert wide.fixture_error.position_bound_m == (0.0025, 0.0025, 0.0)
+@pytest.mark.parametrize(
+    "shipped, variant, field, shipped_value, variant_value",
+    [
+        (
+            "variants/peg_incremental",
+            "peg_incremental_wide_error",
+            "position_bound_m",
+            (0.002, 0.002, 0.0),
+            (0.0025, 0.0025, 0.0),
+        ),
+        ("rj45", "rj45_wide_rotation", "rotation_bound_deg", 2.0, 3.0),
+    ],
+)
+def test_the_wide_error_training_variants_change_only_one_fixture_error_bound(
+    shipped, variant, field, shipped_value, variant_value
+):
+    """Training distributions for policies evaluated on the shipped task: the same task
+    with a wider unseen fixture error, so more episodes are where its residuals fail."""
+    task = load_task(tasks_dir() / f"{shipped}.yaml", check_demo=False)
+    wide = load_task(tasks_dir() / "variants" / f"{variant}.yaml", check_demo=False)
+    assert getattr(task.fixture_error, field) == shipped_value
+    assert getattr(wide.fixture_error, field) == variant_value
     narrowed = dataclasses.replace(
         wide,
         name=task.name,
-        fixture_error=dataclasses.replace(wide.fixture_error, position_bound_m=(0.002, 0.002, 0.0)),
+        fixture_error=dataclasses.replace(wide.fixture_error, **{field: shipped_value}),
     )
     assert narrowed == task
