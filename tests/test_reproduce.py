@@ -639,6 +639,21 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
     assert (args.log_std_init, args.scaled_observation, args.timeout_terminal) == (-2.0, True, True)
 
 
+def test_the_wide_error_row_trains_on_its_training_variant_and_fills_the_peg_column():
+    """Section 19's row: the falling-step recipe trained on the +-2.5 mm variant, its
+    policy evaluated in the incremental table's peg column (peg_incremental)."""
+    from rlfd_drake.cli import build_parser
+
+    peg = "models/tasks/variants/peg_incremental.yaml"
+    wide = "models/tasks/variants/peg_incremental_wide_error.yaml"
+    folder, command = reproduce.RUNS["rlfd_ppo_incremental_wide_error_lrlin"][peg]
+    args = build_parser().parse_args(command.split()[1:])
+    assert (args.task, args.episodes, args.learning_rate_schedule) == (wide, 700, "linear")
+    assert folder == "runs/peg_incremental_wide_error_ppo_std2_so_tt_lrlin_e700_s0" == args.out
+    labels = [row.label for row in reproduce.TABLES["incremental"].rows]
+    assert sum("+-2.5 mm of fixture error" in label for label in labels) == 2  # mean, sampled
+
+
 def test_a_seeded_run_trains_with_its_seed_from_the_same_seeds_earlier_stage():
     """Every RUNS entry trains with seed 0; seeded_run gives seed 2's: its own folder and
     the --init-from stage it starts from both end in _s2, and rlfd parses the command."""
