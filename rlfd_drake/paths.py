@@ -12,6 +12,9 @@ SHIPPED_FULL_POSE_POLICY = "policies/peg_easy_sac.zip"
 SHIPPED_PPO_POLICY = "policies/peg_easy_ppo.zip"
 #: The RJ-45 policy (PPO from a copy of the force search, rj45_slow_insert variant).
 SHIPPED_RJ45_POLICY = "policies/rj45_slow_insert_ppo_imitate.zip"
+#: A full-pose peg policy meeting both peg targets (PPO, incremental residual, trained on
+#: peg_incremental_wide_error and run on peg_incremental; results/full_pose_study.md 19).
+SHIPPED_PEG_INCREMENTAL_POLICY = "policies/peg_incremental_ppo_wide_error.zip"
 
 
 def models_dir() -> Path:

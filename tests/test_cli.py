@@ -183,6 +183,30 @@ def test_the_shipped_rj45_policy_reads_the_torque_as_trained_and_runs_alone():
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
 
 
+def test_the_shipped_full_pose_peg_policy_was_trained_on_the_wide_error_and_runs_on_peg():
+    """models/policies/peg_incremental_ppo_wide_error.zip (results/full_pose_study.md,
+    section 19): PPO trained on the +-2.5 mm training variant, its sidecar says so, and
+    it runs on peg_incremental, whose policies read the incremental residual's rate."""
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.paths import SHIPPED_PEG_INCREMENTAL_POLICY, models_dir
+    from rlfd_drake.policies import load_sb3_model, training_config_file
+
+    shipped = models_dir() / SHIPPED_PEG_INCREMENTAL_POLICY
+    model, kind = load_sb3_model(shipped)
+    assert kind == "ppo"
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert config["task"].endswith("peg_incremental_wide_error.yaml")
+    assert (config["seed"], config["episodes"], config["learning_rate_schedule"]) == (
+        1,
+        700,
+        "linear",
+    )
+    result = evaluate(
+        "models/tasks/variants/peg_incremental.yaml", str(shipped), 1, 0, workers=1, progress=False
+    )
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
+
+
 def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     """rlfd plot: the stored evaluations, one panel per task, without running anything."""
     from PIL import Image
