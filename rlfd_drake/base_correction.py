@@ -20,7 +20,10 @@ import gymnasium as gym
 import numpy as np
 
 from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+from rlfd_drake.baselines.orientation_reference import slope_residual
+from rlfd_drake.baselines.split import SplitResidualPolicy
 from rlfd_drake.control_math import keep_residual_part
+from rlfd_drake.tasks import TaskSpec
 
 __all__ = [
     "BASE_CORRECTIONS",
@@ -32,9 +35,21 @@ __all__ = [
     "make_base_correction",
 ]
 
-#: Name -> factory of a stateless correction rule (obs -> 6-D residual in [-1, 1]).
-BASE_CORRECTIONS: dict[str, Callable[[], Callable[[np.ndarray], np.ndarray]]] = {
-    "force_search": ForceGuidedSearch,
+
+def _force_search_and_slope(task: TaskSpec | None) -> SplitResidualPolicy:
+    if not isinstance(task, TaskSpec):
+        raise ValueError(f"force_search_and_slope needs the task (its table slope), got {task!r}")
+    # The search's translation with the constant turn that undoes the table's slope:
+    # the part of the fixture's rotation that is the same in every episode, which a
+    # residual can learn as a constant (baselines/orientation_reference.py).
+    return SplitResidualPolicy(ForceGuidedSearch(), slope_residual(task))
+
+
+#: Name -> factory of a stateless correction rule (obs -> 6-D residual in [-1, 1]) on
+#: a task.
+BASE_CORRECTIONS: dict[str, Callable[[TaskSpec | None], Callable[[np.ndarray], np.ndarray]]] = {
+    "force_search": lambda task: ForceGuidedSearch(),
+    "force_search_and_slope": _force_search_and_slope,
 }
 
 
@@ -44,10 +59,11 @@ def check_base_correction(name: str) -> None:
         raise ValueError(f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got {name!r}")
 
 
-def make_base_correction(name: str):
-    """A new instance of the rule ``name``; ValueError naming an unknown one."""
+def make_base_correction(name: str, task: TaskSpec | None = None):
+    """A new instance of the rule ``name`` on ``task`` (None for rules that do not read
+    it); ValueError naming an unknown rule, or a missing task a rule needs."""
     check_base_correction(name)
-    return BASE_CORRECTIONS[name]()
+    return BASE_CORRECTIONS[name](task)
 
 
 def applied_residual_mode(base_correction: str | None, learned_mode: str) -> str:
@@ -97,7 +113,7 @@ class BaseCorrectedAction(gym.Wrapper):
     def __init__(self, env: gym.Env, base_correction: str, learned_mode: str = "full"):
         keep_residual_part(np.zeros(6), learned_mode)  # ValueError naming a bad mode
         super().__init__(env)
-        self.base = make_base_correction(base_correction)
+        self.base = make_base_correction(base_correction, getattr(env.unwrapped, "task", None))
         self.learned_mode = learned_mode
         self._observation: np.ndarray | None = None
 

@@ -261,7 +261,7 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
         task,
         dmp_model,
         spec,
-        make_policy(policies[-1], residual_mode),
+        make_policy(policies[-1], residual_mode, task=task),
         diagram_config=RlfdDiagramConfig(residual_mode=residual_mode),
         meshcat=meshcat,
         record_html=html,
@@ -842,7 +842,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--base-correction",
-        choices=["force_search"],
+        choices=["force_search", "force_search_and_slope"],
         help="learn the residual on top of this hand-written rule (added to the "
         "learned action in training and in evaluations); default: none, the paper's rLfD",
     )

@@ -184,7 +184,9 @@ def make_policy(
         )
     if ENSEMBLE_SEPARATOR in policy_spec:
         members = ensemble_members(policy_spec, deterministic)
-        return MeanOfPolicies([make_policy(m, residual_mode, episode_seed) for m in members])
+        return MeanOfPolicies(
+            [make_policy(m, residual_mode, episode_seed, task=task) for m in members]
+        )
     if policy_spec == "dmp":
         return None
     if policy_spec.endswith(".npz"):
@@ -249,7 +251,7 @@ def make_policy(
 
     # Trained on top of a rule: it acts on top of the same rule, on its own part of the
     # residual (the diagram applies the whole: diagram_residual_mode).
-    return BaseCorrectedPolicy(make_base_correction(base_correction), policy, residual_mode)
+    return BaseCorrectedPolicy(make_base_correction(base_correction, task), policy, residual_mode)
 
 
 # --------------------------------------------------------------------------------------

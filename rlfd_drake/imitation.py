@@ -63,7 +63,11 @@ def collect_teacher_episodes(venv, teacher_name: str, episodes: int, gamma: floa
     """
     if episodes < 1:
         raise ValueError(f"imitation_episodes must be >= 1, got {episodes}")
-    teachers = [make_base_correction(teacher_name) for _ in range(venv.num_envs)]
+    try:
+        task = venv.get_attr("task", [0])[0]  # a rule may read the task (its table slope)
+    except AttributeError:
+        task = None
+    teachers = [make_base_correction(teacher_name, task) for _ in range(venv.num_envs)]
     if len(venv.observation_space.shape) != 1:
         raise ValueError(
             f"imitation needs a flat observation, the env gives {venv.observation_space.shape}"

@@ -72,6 +72,24 @@ def test_an_unknown_rule_is_refused_by_name():
         TrainConfig(base_correction="force_search", composition="hybrid")
 
 
+def test_the_search_with_the_slope_turns_by_the_tables_constant_tilt():
+    """force_search_and_slope: the search's translation, the slope's constant turn."""
+    from rlfd_drake.baselines.orientation_reference import slope_residual
+    from rlfd_drake.tasks import load_task
+
+    task = load_task("rj45")
+    rule = make_base_correction("force_search_and_slope", task)
+    pressed = _pressed_observation()
+    slope = slope_residual(task)(pressed)
+    assert np.linalg.norm(slope[3:6]) > 0.3  # 1 deg of the 3 deg range
+    np.testing.assert_allclose(rule(pressed), np.r_[ForceGuidedSearch()(pressed)[0:3], slope[3:6]])
+    np.testing.assert_allclose(rule(np.zeros(OBSERVATION_SIZE))[0:3], 0.0)  # free space
+    with pytest.raises(ValueError, match="force_search_and_slope needs the task"):
+        make_base_correction("force_search_and_slope")
+    with pytest.raises(ValueError, match="force_search_and_slope needs the task"):
+        BaseCorrectedAction(_RecordingEnv(), "force_search_and_slope")
+
+
 def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():
     env = _RecordingEnv()
     wrapped = BaseCorrectedAction(env, "force_search")

@@ -78,6 +78,8 @@ def test_teacher_episodes_hold_what_the_learner_saw_and_the_discounted_returns()
         collect_teacher_episodes(venv, "force_search", episodes=0, gamma=0.5)
     with pytest.raises(ValueError, match="base_correction must be one of"):
         collect_teacher_episodes(venv, "oracle", episodes=1, gamma=0.5)
+    with pytest.raises(ValueError, match="force_search_and_slope needs the task"):
+        collect_teacher_episodes(venv, "force_search_and_slope", episodes=1, gamma=0.5)
 
 
 def test_the_fit_copies_the_rule_into_ppos_mean_and_leaves_its_noise():
