@@ -458,6 +458,18 @@ RUNS["ppo_imitate_fs_lrlin_1400"] = {
         "ppo",
     )
 }
+# The same one-run recipe copying the search with the table slope's constant turn
+# (base_correction "force_search_and_slope"): results/rj45_study.md, last section.
+RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
+    "rj45": _run(
+        "runs/rj45_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e1400_s0",
+        "rj45",
+        1400,
+        f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} "
+        "--imitate force_search_and_slope --imitation-episodes 200",
+        "ppo",
+    )
+}
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -1075,6 +1087,12 @@ TABLES["rj45_imitation"] = Table(
             "run:ppo_imitate_fs_lrlin_1400",
             _PAPER_RJ45_RLFD,
         ),
+        Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
+        Row(
+            "The same one run from a copy of the search + the slope's turn",
+            "run:ppo_imitate_fs_slope_lrlin_1400",
+            _PAPER_RJ45_RLFD,
+        ),
     ],
     "Before RL, PPO's mean is fitted to the actions of the force-guided search on 200 "
     "training episodes and its value to their discounted returns (rlfd train --imitate "
@@ -1082,7 +1100,9 @@ TABLES["rj45_imitation"] = Table(
     "scaled observation with a 0.05 N m torque scale, force-limit penalty 1, time limit "
     "terminal) for 700 episodes, and 700 more from that policy (--init-from); the last "
     "row instead trains 1,400 episodes in one run with the step size falling linearly to "
-    "zero (--learning-rate-schedule linear; shipped rj45 only). At run time the network "
+    "zero (--learning-rate-schedule linear; shipped rj45 only), the last from a copy of "
+    "the search with the constant turn that undoes the table's slope (--imitate "
+    "force_search_and_slope). At run time the network "
     "acts alone. Columns: models/tasks/variants/rj45_slow_insert.yaml (the "
     "slow demonstration) and the shipped rj45. All 160 starts of RJ-45's grid, whatever "
     "the budget; training seed 0 (other seeds: results/seeds_*imitate*.md). The paper's "
@@ -1210,8 +1230,8 @@ def _cell(
     kind, _, detail = row.source.partition(":")
     if kind == "none":
         return {"status": "not run", "reason": detail}, None
-    if kind in NAMED_POLICIES:
-        policy, label, trained = kind, kind, None
+    if all(part in NAMED_POLICIES for part in kind.split("|")):  # e.g. "force_search|slope"
+        policy, label, trained = kind, policy_stem(kind), None
         missing = None  # nothing to look for on disk
     elif kind == "policy":
         policy = str(models_dir() / detail)

@@ -622,6 +622,7 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
             2100,
         ),
         ("ppo_imitate_fs_lrlin_1400", "rj45", 1400),
+        ("ppo_imitate_fs_slope_lrlin_1400", "rj45", 1400),
     ],
 )
 def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
@@ -637,6 +638,28 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
     assert (args.task, args.episodes, args.algo, args.out) == (path, episodes, "ppo", folder)
     assert args.init_from is None
     assert (args.log_std_init, args.scaled_observation, args.timeout_terminal) == (-2.0, True, True)
+
+
+def test_the_slope_teacher_row_trains_what_the_study_ran():
+    """rj45_study.md's last section: the falling-step imitation recipe whose teacher is
+    the search with the slope's turn; the row's command parses to the study's."""
+    from rlfd_drake.cli import build_parser
+
+    folder, command = reproduce.RUNS["ppo_imitate_fs_slope_lrlin_1400"]["rj45"]
+    studied = (
+        "train --task rj45 --algo ppo --episodes 1400 --seed 0 --envs 2 --log-std-init -2.0 "
+        "--scaled-observation --timeout-terminal --contact-torque-nm 0.05 "
+        "--force-limit-penalty 1 --imitate force_search_and_slope --imitation-episodes 200 "
+        f"--learning-rate-schedule linear --no-progress --out {folder}"
+    )
+    parser = build_parser()
+    row = vars(parser.parse_args(command.split()[1:]))
+    ran = vars(parser.parse_args(studied.split()))
+    assert {k: v for k, v in row.items() if k != "no_progress"} == {
+        k: v for k, v in ran.items() if k != "no_progress"
+    }
+    labels = [row.label for row in reproduce.TABLES["rj45_imitation"].rows]
+    assert "Force-guided search + the slope's constant turn" in labels
 
 
 def test_the_wide_error_row_trains_on_its_training_variant_and_fills_the_peg_column():
