@@ -83,7 +83,8 @@ class Row:
     Attributes:
         label: the row's name (the paper's, plus what differs here).
         source: a named policy (``evaluate.NAMED_POLICIES``: "dmp", "random",
-            "force_search"), "policy:<file under models/>" (a shipped policy),
+            "force_search", ...) or a "translation|orientation" split of two (e.g.
+            "force_search|slope"), "policy:<file under models/>" (a shipped policy),
             "run:<key of RUNS>" (the policy of the column's task trained by ``rlfd
             train``; not run, with the command to train it, if the folder has no
             policy yet),
