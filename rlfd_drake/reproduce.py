@@ -1090,7 +1090,13 @@ TABLES["rj45_imitation"] = Table(
         ),
         Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
         Row(
-            "The same one run from a copy of the search + the slope's turn",
+            "PPO's copy of the search + the slope's turn, before RL",
+            "run:ppo_imitate_fs_slope_lrlin_1400",
+            {},
+            checkpoint="policy_0_steps",
+        ),
+        Row(
+            "PPO from a copy of the search + the slope's turn, 1,400 episodes in one run",
             "run:ppo_imitate_fs_slope_lrlin_1400",
             _PAPER_RJ45_RLFD,
         ),
@@ -1099,11 +1105,12 @@ TABLES["rj45_imitation"] = Table(
     "training episodes and its value to their discounted returns (rlfd train --imitate "
     "force_search --imitation-episodes 200); then section 8's RJ-45 recipe (log std -2, "
     "scaled observation with a 0.05 N m torque scale, force-limit penalty 1, time limit "
-    "terminal) for 700 episodes, and 700 more from that policy (--init-from); the last "
-    "row instead trains 1,400 episodes in one run with the step size falling linearly to "
-    "zero (--learning-rate-schedule linear; shipped rj45 only), the last from a copy of "
-    "the search with the constant turn that undoes the table's slope (--imitate "
-    "force_search_and_slope). At run time the network "
+    "terminal) for 700 episodes, and 700 more from that policy (--init-from). The rows "
+    "'in one run' instead train 1,400 episodes with the step size falling linearly to "
+    "zero (--learning-rate-schedule linear; shipped rj45 only); the last two rows copy the "
+    "search with the constant turn that undoes the table's slope (--imitate "
+    "force_search_and_slope; the rule's own row is above them), before RL and after. At "
+    "run time the network "
     "acts alone. Columns: models/tasks/variants/rj45_slow_insert.yaml (the "
     "slow demonstration) and the shipped rj45. All 160 starts of RJ-45's grid, whatever "
     "the budget; training seed 0 (other seeds: results/seeds_*imitate*.md). The paper's "
