@@ -87,7 +87,8 @@ class RlfdDiagramConfig:
             would have found).
         residual_activation_s: when the residual starts acting; None = the task's
             (5 s: the paper's simulated half-episode).
-        residual_period_s: residual policy period (10 Hz).
+        residual_period_s: residual policy period, s; None = the task's
+            (``residual_period_s``: 0.1 s, the paper's 10 Hz).
         log_period_s: period of the episode logs; None = no logs (training, where
             nobody reads them).
         composition: one of ``COMPOSITIONS``.
@@ -103,7 +104,7 @@ class RlfdDiagramConfig:
     max_translation_m: float | None = None
     max_rotation_rad: float | None = None
     residual_activation_s: float | None = None
-    residual_period_s: float = 0.1
+    residual_period_s: float | None = None
     log_period_s: float | None = 0.01
     composition: str = "residual"
     max_speed_m_s: float = 0.05
@@ -112,7 +113,7 @@ class RlfdDiagramConfig:
     def __post_init__(self) -> None:
         for name in ("dmp_period_s", "residual_period_s", "log_period_s"):
             value = getattr(self, name)
-            if value is None and name == "log_period_s":
+            if value is None and name in ("residual_period_s", "log_period_s"):
                 continue
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number of seconds, got {value}")
@@ -141,6 +142,13 @@ class RlfdDiagramConfig:
             else self.max_rotation_rad
         )
         return float(translation), float(rotation)
+
+    def residual_period_for(self, task: TaskSpec) -> float:
+        """Period of the residual policy on ``task``, s: this config's or the task's."""
+        period = (
+            task.residual_period_s if self.residual_period_s is None else self.residual_period_s
+        )
+        return float(period)
 
     def impedance_for(self, task: TaskSpec) -> CartesianImpedanceConfig:
         """The controller's gains on ``task``: this config's, with the task's rotational
@@ -323,7 +331,7 @@ def BuildRlfdDiagram(
             ResidualPolicy(
                 policy,
                 ResidualPolicyConfig(
-                    period_s=config.residual_period_s, observation_size=OBSERVATION_SIZE
+                    period_s=config.residual_period_for(task), observation_size=OBSERVATION_SIZE
                 ),
             ),
         )
@@ -366,7 +374,7 @@ def BuildRlfdDiagram(
             ResidualPolicy(
                 coupling_policy,
                 ResidualPolicyConfig(
-                    period_s=config.residual_period_s, observation_size=OBSERVATION_SIZE
+                    period_s=config.residual_period_for(task), observation_size=OBSERVATION_SIZE
                 ),
             ),
         )

@@ -155,7 +155,8 @@ class RlfdEnv(DrakeGymEnv):
     ``max_translation_m`` (1 cm) and added to the DMP position; ``r`` is an angle-axis
     vector scaled to ``max_rotation_rad`` (5 deg), ``Q_delta = [cos(a/2), r/|r|
     sin(a/2)]`` composed as ``Q_f = Q_delta o Q_b``. ``residual_mode`` may restrict it to
-    translation or orientation. The action is held for one step (0.1 s).
+    translation or orientation. The action is held for one step (the task's
+    ``residual_period_s``: 0.1 s, 10 Hz).
 
     ## Observation Space
     ``Box(-inf, inf, (26,), float32)`` (see ``systems/observer.py``): part position
@@ -301,6 +302,8 @@ class RlfdEnv(DrakeGymEnv):
                 "residual_mode": residual_mode,
                 "composition": composition,
                 "log_period_s": None,
+                # Resolved, so that time_step and the readers of diagram_config see it.
+                "residual_period_s": config.residual_period_for(self.task),
             }
         )
         self.dmp_model = load_task_dmp(self.task)

@@ -245,8 +245,11 @@ class TaskSpec:
         translational_stiffness_N_per_m: optional translational stiffness of the
             controller on this task, N/m (None = the controller's, 2000): the spring
             force with which a part resting on its fixture is pressed down.
+        residual_period_s: period of the residual policy, s (paper: 0.1 s, 10 Hz).
+            A shorter period lets the residual react sooner after contact (a
+            deviation from the paper; models/tasks/variants/rj45_fast_residual.yaml).
         residual_filter_time_constant_s: optional time constant of a first-order
-            low-pass filter on the residual action (None = none: each 10 Hz action
+            low-pass filter on the residual action (None = none: each residual action
             steps the set-point), s.
         residual_rate_per_s: optional: the residual action is a rate, integrated into
             the held offset the composer adds (systems/residual_integrator.py), in
@@ -271,6 +274,7 @@ class TaskSpec:
     residual_max_translation_m: float = 0.01
     residual_max_rotation_rad: float = 0.087
     residual_max_push_m: float | None = None
+    residual_period_s: float = 0.1
     rotational_stiffness_Nm_per_rad: float | None = None
     translational_stiffness_N_per_m: float | None = None
     residual_filter_time_constant_s: float | None = None
@@ -464,6 +468,13 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.translational_stiffness_N_per_m, "translational_stiffness_N_per_m")
     _positive(task.residual_filter_time_constant_s, "residual_filter_time_constant_s")
     _positive(task.residual_rate_per_s, "residual_rate_per_s")
+    _positive(task.residual_period_s, "residual_period_s")
+    if task.residual_period_s > task.episode_time_s - task.residual_activation_s:
+        raise ValueError(
+            f"residual_period_s = {task.residual_period_s} is longer than the time the "
+            f"residual acts (episode_time_s - residual_activation_s = "
+            f"{task.episode_time_s - task.residual_activation_s})"
+        )
     if task.residual_activation_s > task.episode_time_s:
         raise ValueError(
             f"residual_activation_s = {task.residual_activation_s} is after the episode end "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 
 import gymnasium as gym
@@ -10,6 +11,7 @@ import pytest
 
 from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.env import ENV_IDS, RlfdEnv
+from rlfd_drake.tasks import load_task
 
 # A short DMP-only phase keeps the tests fast; the env's logic is the same.
 FAST = RlfdDiagramConfig(residual_activation_s=0.3)
@@ -142,6 +144,24 @@ def test_episode_ends_by_time_limit():
     assert truncated and not info["success"]
     assert steps == 5
     assert info["time_s"] == pytest.approx(10.0)
+
+
+def test_the_step_is_the_tasks_residual_period_unless_the_config_sets_one():
+    """A task's residual_period_s sets the env's step (the residual's rate); an explicit
+    diagram config period wins; the last half-second is 10 steps at 20 Hz, 5 at 10 Hz."""
+    fast_task = dataclasses.replace(load_task("peg_easy"), residual_period_s=0.05)
+    late = RlfdDiagramConfig(residual_activation_s=9.5)
+    for config, period in ((late, 0.05), (dataclasses.replace(late, residual_period_s=0.1), 0.1)):
+        env = RlfdEnv(fast_task, diagram_config=config)
+        assert env.time_step == period and env.diagram_config.residual_period_s == period
+        env.reset(seed=0, options={"fixture_dp": np.array([0.01, 0.0, 0.0])})
+        steps, done = 0, False
+        while not done:
+            _, _, terminated, truncated, info = env.step(np.zeros(6, np.float32))
+            steps += 1
+            done = terminated or truncated
+        assert steps == round(0.5 / period)
+        assert info["time_s"] == pytest.approx(10.0)
 
 
 def test_pickles_and_runs_in_subproc_vec_env():

@@ -71,6 +71,26 @@ def test_zero_policy_object_equals_dmp_alone(peg_easy, dmp, nominal_result):
     assert with_policy.final_distance_m == pytest.approx(nominal_result.final_distance_m, abs=1e-9)
 
 
+def test_the_in_diagram_policy_runs_at_the_tasks_residual_period(peg_easy, dmp):
+    """The policy system ticks once per the task's residual period: twice as often at
+    20 Hz as at the paper's 10 Hz over the same episode."""
+    counts = {}
+    for period_s in (0.1, 0.05):
+        calls = []
+
+        def counting_policy(observation, calls=calls):
+            calls.append(observation)
+            return np.zeros(6)
+
+        task = dataclasses.replace(peg_easy, episode_time_s=7.5, residual_period_s=period_s)
+        spec = EpisodeSpec(fixture_dp=(0.01, 0.0, 0.0))  # fails: runs to the time limit
+        r = run_episode(task, dmp, spec, policy=counting_policy)
+        assert r.sim_time_s == pytest.approx(7.5)
+        counts[period_s] = len(calls)
+    assert counts[0.1] == pytest.approx(7.5 / 0.1, abs=5)
+    assert abs(counts[0.05] - 2 * counts[0.1]) <= 2, counts
+
+
 def test_large_fixture_error_fails_on_the_entrance(peg_easy, dmp):
     # 1 cm off: the 30 mm peg lands on the wall around the 32 mm hole.
     spec = EpisodeSpec(fixture_dp=(0.01, 0.0, 0.0))

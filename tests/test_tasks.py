@@ -190,7 +190,12 @@ def test_fixture_error():
 
 @pytest.mark.parametrize(
     "field",
-    ["rotational_stiffness_Nm_per_rad", "translational_stiffness_N_per_m", "residual_rate_per_s"],
+    [
+        "rotational_stiffness_Nm_per_rad",
+        "translational_stiffness_N_per_m",
+        "residual_rate_per_s",
+        "residual_period_s",
+    ],
 )
 @pytest.mark.parametrize("value", [0.0, -20.0, float("nan"), float("inf")])
 def test_bad_positive_task_field(tmp_path, field, value):
@@ -198,6 +203,22 @@ def test_bad_positive_task_field(tmp_path, field, value):
     message = "must be positive" if math.isfinite(value) else "expected a finite number"
     with pytest.raises(ValueError, match=rf"{field}.*{message}"):
         load_task(path, check_demo=False)
+
+
+def test_a_residual_period_longer_than_the_residual_acts_is_refused(tmp_path):
+    path = _write_variant(tmp_path, lambda d: d.update({"residual_period_s": 6.0}))
+    with pytest.raises(ValueError, match=r"residual_period_s = 6.0 is longer than the time"):
+        load_task(path, check_demo=False)
+
+
+def test_the_fast_residual_rj45_variant_changes_only_the_residual_period():
+    """rj45_fast_residual is rj45 with a 20 Hz residual (the paper's is 10 Hz): same
+    demonstration, starts, errors and bounds, so evaluations share the starts."""
+    shipped = load_task("rj45", check_demo=False)
+    variant = load_task(tasks_dir() / "variants" / "rj45_fast_residual.yaml")
+    assert shipped.residual_period_s == 0.1
+    assert variant.residual_period_s == 0.05
+    assert dataclasses.replace(variant, name="rj45", residual_period_s=0.1) == shipped
 
 
 @pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
