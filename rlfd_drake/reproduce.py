@@ -461,15 +461,22 @@ RUNS["ppo_imitate_fs_lrlin_1400"] = {
 }
 # The same one-run recipe copying the search with the table slope's constant turn
 # (base_correction "force_search_and_slope"): results/rj45_study.md, last section.
+_SLOPE_TEACHER_FLAGS = (
+    f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} "
+    "--imitate force_search_and_slope --imitation-episodes 200"
+)
+#: rj45 with the residual at 20 Hz instead of the paper's 10 Hz (a deviation):
+#: results/rj45_study.md, last section.
+_RJ45_FAST_RESIDUAL = "models/tasks/variants/rj45_fast_residual.yaml"
 RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
-    "rj45": _run(
-        "runs/rj45_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e1400_s0",
-        "rj45",
+    task: _run(
+        f"runs/{Path(task).stem}_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e1400_s0",
+        task,
         1400,
-        f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} "
-        "--imitate force_search_and_slope --imitation-episodes 200",
+        _SLOPE_TEACHER_FLAGS,
         "ppo",
     )
+    for task in ("rj45", _RJ45_FAST_RESIDUAL)
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
@@ -1116,6 +1123,37 @@ TABLES["rj45_imitation"] = Table(
     "the budget; training seed 0 (other seeds: results/seeds_*imitate*.md). The paper's "
     "figures are its physical robot (Table IV: DMP 0 %, PPO / PPO 70.6 %); its rLfD starts "
     "from the zero residual, not from a teacher.",
+    evaluation_episodes=160,
+)
+
+_RATE_COLUMNS = {"rj45, 10 Hz residual": "rj45", "rj45, 20 Hz residual": _RJ45_FAST_RESIDUAL}
+TABLES["rj45_residual_rate"] = Table(
+    "RJ-45 with the residual at the paper's 10 Hz and at 20 Hz (mean action)",
+    _RATE_COLUMNS,
+    [
+        Row("DMP alone", "dmp", dict.fromkeys(_RATE_COLUMNS, 0.0)),
+        Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
+        Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
+        Row(
+            "PPO's copy of the search + the slope's turn, before RL",
+            "run:ppo_imitate_fs_slope_lrlin_1400",
+            {},
+            checkpoint="policy_0_steps",
+        ),
+        Row(
+            "PPO from that copy, 1,400 episodes, step size falling to zero",
+            "run:ppo_imitate_fs_slope_lrlin_1400",
+            dict.fromkeys(_RATE_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"]),
+        ),
+    ],
+    "The shipped rj45 with the residual policy at the paper's 10 Hz, and "
+    "models/tasks/variants/rj45_fast_residual.yaml: the same task with the residual at "
+    "20 Hz (residual_period_s 0.05; a deviation from the paper, whose policy runs at "
+    "10 Hz). The DMP alone is the same on both (no residual). The PPO rows are the "
+    "rj45_imitation table's slope-teacher recipe, unchanged, on each column's task. All "
+    "160 starts of RJ-45's grid, whatever the budget; training seed 0 (other seeds: "
+    "results/seeds_*fsslope*.md). The paper's figures are its physical robot (Table IV: "
+    "DMP 0 %, PPO / PPO 70.6 %).",
     evaluation_episodes=160,
 )
 

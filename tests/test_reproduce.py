@@ -662,6 +662,27 @@ def test_the_slope_teacher_row_trains_what_the_study_ran():
     assert "Force-guided search + the slope's constant turn" in labels
 
 
+def test_the_residual_rate_table_trains_the_slope_recipe_on_the_20_hz_variant():
+    """rj45_study.md's last section: the slope-teacher recipe, unchanged, on rj45 with a
+    20 Hz residual; the variant's command differs from rj45's only in task and folder."""
+    from rlfd_drake.cli import build_parser
+    from rlfd_drake.tasks import load_task
+
+    table = reproduce.TABLES["rj45_residual_rate"]
+    fast = table.columns["rj45, 20 Hz residual"]
+    assert table.columns["rj45, 10 Hz residual"] == "rj45"
+    assert load_task(fast).residual_period_s == 0.05
+    runs = reproduce.RUNS["ppo_imitate_fs_slope_lrlin_1400"]
+    parser = build_parser()
+    shipped = vars(parser.parse_args(runs["rj45"][1].split()[1:]))
+    variant = vars(parser.parse_args(runs[fast][1].split()[1:]))
+    assert variant["task"] == fast and variant["out"] == runs[fast][0]
+    assert runs[fast][0].startswith("runs/rj45_fast_residual_")
+    differ = {k for k in shipped if shipped[k] != variant[k]}
+    assert differ == {"task", "out"}
+    assert table.evaluation_episodes == 160
+
+
 def test_the_wide_error_row_trains_on_its_training_variant_and_fills_the_peg_column():
     """Section 19's row: the falling-step recipe trained on the +-2.5 mm variant, its
     policy evaluated in the incremental table's peg column (peg_incremental)."""
