@@ -1072,6 +1072,23 @@ TABLES["6_incremental_nopush"] = Table(
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
 
+
+def _slope_teacher_rows(trained_label: str, paper: dict[str, float]) -> list[Row]:
+    """The slope teacher's rows: the rule, PPO's copy of it before RL, and after RL
+    (labelled ``trained_label``, beside the paper's ``paper``)."""
+    run = "run:ppo_imitate_fs_slope_lrlin_1400"
+    return [
+        Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
+        Row(
+            "PPO's copy of the search + the slope's turn, before RL",
+            run,
+            {},
+            checkpoint="policy_0_steps",
+        ),
+        Row(trained_label, run, paper),
+    ]
+
+
 _IMITATION_COLUMNS = {"rj45 slow insert": _RJ45_SLOW_INSERT, "rj45": "rj45"}
 #: The paper's RJ-45 figures (Table IV): its DMP alone and its full-pose rLfD.
 _PAPER_RJ45_DMP = dict.fromkeys(_IMITATION_COLUMNS, 0.0)
@@ -1095,16 +1112,8 @@ TABLES["rj45_imitation"] = Table(
             "run:ppo_imitate_fs_lrlin_1400",
             _PAPER_RJ45_RLFD,
         ),
-        Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
-        Row(
-            "PPO's copy of the search + the slope's turn, before RL",
-            "run:ppo_imitate_fs_slope_lrlin_1400",
-            {},
-            checkpoint="policy_0_steps",
-        ),
-        Row(
+        *_slope_teacher_rows(
             "PPO from a copy of the search + the slope's turn, 1,400 episodes in one run",
-            "run:ppo_imitate_fs_slope_lrlin_1400",
             _PAPER_RJ45_RLFD,
         ),
     ],
@@ -1133,16 +1142,8 @@ TABLES["rj45_residual_rate"] = Table(
     [
         Row("DMP alone", "dmp", dict.fromkeys(_RATE_COLUMNS, 0.0)),
         Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
-        Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
-        Row(
-            "PPO's copy of the search + the slope's turn, before RL",
-            "run:ppo_imitate_fs_slope_lrlin_1400",
-            {},
-            checkpoint="policy_0_steps",
-        ),
-        Row(
+        *_slope_teacher_rows(
             "PPO from that copy, 1,400 episodes, step size falling to zero",
-            "run:ppo_imitate_fs_slope_lrlin_1400",
             dict.fromkeys(_RATE_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"]),
         ),
     ],
