@@ -211,14 +211,17 @@ def test_a_residual_period_longer_than_the_residual_acts_is_refused(tmp_path):
         load_task(path, check_demo=False)
 
 
-def test_the_fast_residual_rj45_variant_changes_only_the_residual_period():
-    """rj45_fast_residual is rj45 with a 20 Hz residual (the paper's is 10 Hz): same
+@pytest.mark.parametrize("name", ["rj45", "peg_incremental"])
+def test_the_fast_residual_variants_change_only_the_residual_period(name):
+    """<name>_fast_residual is <name> with a 20 Hz residual (the paper's is 10 Hz): same
     demonstration, starts, errors and bounds, so evaluations share the starts."""
-    shipped = load_task("rj45", check_demo=False)
-    variant = load_task(tasks_dir() / "variants" / "rj45_fast_residual.yaml")
+    variants = tasks_dir() / "variants"
+    path = name if name == "rj45" else variants / f"{name}.yaml"
+    shipped = load_task(path, check_demo=False)
+    variant = load_task(variants / f"{name}_fast_residual.yaml")
     assert shipped.residual_period_s == 0.1
     assert variant.residual_period_s == 0.05
-    assert dataclasses.replace(variant, name="rj45", residual_period_s=0.1) == shipped
+    assert dataclasses.replace(variant, name=shipped.name, residual_period_s=0.1) == shipped
 
 
 @pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
