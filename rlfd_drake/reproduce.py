@@ -459,8 +459,6 @@ RUNS["ppo_imitate_fs_lrlin_1400"] = {
         "ppo",
     )
 }
-# The same one-run recipe copying the search with the table slope's constant turn
-# (base_correction "force_search_and_slope"): results/rj45_study.md, last section.
 _SLOPE_TEACHER_FLAGS = (
     f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']} "
     "--imitate force_search_and_slope --imitation-episodes 200"
@@ -468,6 +466,9 @@ _SLOPE_TEACHER_FLAGS = (
 #: rj45 with the residual at 20 Hz instead of the paper's 10 Hz (a deviation):
 #: results/rj45_study.md, last section.
 _RJ45_FAST_RESIDUAL = "models/tasks/variants/rj45_fast_residual.yaml"
+# The same one-run recipe copying the search with the table slope's constant turn
+# (base_correction "force_search_and_slope"), on rj45 and its 20 Hz variant:
+# results/rj45_study.md, the last two sections.
 RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
     task: _run(
         f"runs/{Path(task).stem}_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e1400_s0",
