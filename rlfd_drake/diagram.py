@@ -8,7 +8,8 @@ The residual comes either from the exported input port ``residual`` (the Gym env
 drives it) or from a :class:`ResidualPolicy` inside the diagram (deployment). The
 controller only knows the arm and its payload; the DMP only knows the demonstration
 (its goal is the demonstrated, nominal one); only the plant knows where the fixture
-really is.
+really is. A task with ``dmp_phase_stop_gain_per_m2 > 0`` closes one loop: the
+controller's tracking error slows the DMP (phase stopping) while contact holds the part.
 """
 
 from __future__ import annotations
@@ -246,7 +247,15 @@ def BuildRlfdDiagram(
         "impedance", CartesianImpedanceController(control_plant, config.impedance_for(task))
     )
     X_WGoal_nominal = NominalGoal(task)
-    dmp_system = builder.AddNamedSystem("dmp", DmpSystem(dmp_model, period_s=config.dmp_period_s))
+    dmp_system = builder.AddNamedSystem(
+        "dmp",
+        DmpSystem(
+            dmp_model,
+            period_s=config.dmp_period_s,
+            phase_stop_gain_per_m2=task.dmp_phase_stop_gain_per_m2,
+            phase_stop_deadband_m=task.dmp_phase_stop_deadband_m,
+        ),
+    )
     extrapolator_config = replace(config.extrapolator, source_period_s=config.dmp_period_s)
     extrapolator = builder.AddNamedSystem("extrapolator", QuinticExtrapolator(extrapolator_config))
     activation = (
@@ -318,6 +327,10 @@ def BuildRlfdDiagram(
         observer.GetInputPort("generalized_contact_forces"),
     )
     connect(dmp_system.GetOutputPort("phase"), observer.GetInputPort("phase"))
+    if task.dmp_phase_stop_gain_per_m2 > 0.0:
+        connect(
+            controller.GetOutputPort("tracking_error"), dmp_system.GetInputPort("tracking_error")
+        )
 
     residual_policy = None
     if policy is None:

@@ -44,6 +44,13 @@ Choices (documented deviations and details)
   ``[w; v]`` order of spatial velocities). It enters ``tau dz`` / ``tau d(eta)`` exactly as
   ``f`` does, i.e. it adds ``C_t / tau^2`` to the linear (m/s^2) and angular (rad/s^2)
   acceleration.
+- **Phase stopping** (optional, off in the paper's DMP). Ijspeert et al. (2013) slow the
+  canonical system while the robot lags its set-point, ``tau dx = -alpha_x x / (1 +
+  alpha_px |e|^2)``. Here the whole DMP (canonical *and* transformation systems) runs
+  with ``tau (1 + alpha_px max(0, |e| - e_0)^2)`` (:func:`phase_stop_time_scale`), so
+  the set-point waits too instead of running on towards the goal while the phase is
+  held; ``e`` is the controller's translational tracking error and the deadband ``e_0``
+  leaves free motion untouched.
 
 Differences to ``movement_primitives.dmp.CartesianDMP`` (the test oracle) are listed in
 :func:`movement_primitives_differences`.
@@ -82,6 +89,7 @@ __all__ = [
     "initial_state",
     "forcing_terms",
     "dmp_step",
+    "phase_stop_time_scale",
     "rollout",
     "get_weights",
     "with_weights",
@@ -653,6 +661,32 @@ def dmp_step(
     s = state.tolist()
     _advance(s, f.tolist(), g.tolist(), qg.tolist(), k)
     return np.array(s)
+
+
+def phase_stop_time_scale(tracking_error_m, gain_per_m2: float, deadband_m: float = 0.0) -> float:
+    """Time scale ``1 + gain max(0, |e| - deadband)^2`` of a phase-stopped DMP (>= 1).
+
+    The deadband keeps the DMP as it is while the arm merely lags its set-point in free
+    motion (under a millimetre on the Panda here): slowing on that lag changes the
+    set-point's velocity, which changes the lag, and a large gain makes that loop ring.
+
+    Args:
+        tracking_error_m: set-point minus measured position (m), shape (3,).
+        gain_per_m2: ``alpha_px`` (1/m^2); 0 turns phase stopping off.
+        deadband_m: error (m) below which the DMP is not slowed.
+
+    Returns:
+        The factor by which the DMP's ``tau`` grows over the next step (1: no slowing).
+    """
+    if not (math.isfinite(gain_per_m2) and gain_per_m2 >= 0.0):
+        raise ValueError(f"gain_per_m2 must be finite and >= 0, got {gain_per_m2}")
+    if not (math.isfinite(deadband_m) and deadband_m >= 0.0):
+        raise ValueError(f"deadband_m must be finite and >= 0 m, got {deadband_m}")
+    e = np.asarray(tracking_error_m, dtype=float)
+    if e.shape != (3,) or not np.all(np.isfinite(e)):
+        raise ValueError(f"tracking_error_m must be 3 finite numbers (m), got {e}")
+    excess = max(0.0, math.sqrt(float(e @ e)) - deadband_m)
+    return 1.0 + gain_per_m2 * excess * excess
 
 
 def rollout(

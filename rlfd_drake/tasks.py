@@ -255,6 +255,13 @@ class TaskSpec:
             the held offset the composer adds (systems/residual_integrator.py), in
             residual units per second (None = the paper's residual: the action is the
             offset). Residual composition only.
+        dmp_phase_stop_gain_per_m2: ``alpha_px`` of the DMP's phase stopping, 1/m^2
+            (0, the paper's DMP: none). The DMP then runs with ``tau (1 + alpha_px
+            max(0, |e| - dmp_phase_stop_deadband_m)^2)``, ``e`` the controller's
+            translational tracking error, so it slows while contact holds the part
+            back (Ijspeert et al. 2013; a deviation from the paper;
+            models/tasks/variants/rj45_phase_stop.yaml).
+        dmp_phase_stop_deadband_m: tracking error below which the DMP is not slowed, m.
     """
 
     name: str
@@ -279,6 +286,8 @@ class TaskSpec:
     translational_stiffness_N_per_m: float | None = None
     residual_filter_time_constant_s: float | None = None
     residual_rate_per_s: float | None = None
+    dmp_phase_stop_gain_per_m2: float = 0.0
+    dmp_phase_stop_deadband_m: float = 0.0
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -387,7 +396,7 @@ def _from_dict(cls: type, data: dict, where: str) -> object:
 def _positive(value: float | None, name: str, allow_zero: bool = False) -> None:
     if value is None:
         return
-    if value < 0.0 or (value == 0.0 and not allow_zero):
+    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
         kind = "non-negative" if allow_zero else "positive"
         raise ValueError(f"{name} must be {kind}, got {value}")
 
@@ -469,6 +478,8 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.residual_filter_time_constant_s, "residual_filter_time_constant_s")
     _positive(task.residual_rate_per_s, "residual_rate_per_s")
     _positive(task.residual_period_s, "residual_period_s")
+    _positive(task.dmp_phase_stop_gain_per_m2, "dmp_phase_stop_gain_per_m2", allow_zero=True)
+    _positive(task.dmp_phase_stop_deadband_m, "dmp_phase_stop_deadband_m", allow_zero=True)
     if task.residual_period_s > task.episode_time_s - task.residual_activation_s:
         raise ValueError(
             f"residual_period_s = {task.residual_period_s} is longer than the time the "

@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 from pydrake.common.eigen_geometry import AngleAxis, Quaternion
+from pydrake.math import RigidTransform
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
@@ -313,3 +314,38 @@ def test_a_task_with_a_push_bound_gives_it_to_the_composer(peg):
     np.testing.assert_allclose(offset, [max_translation_m, 0.0, 0.0], atol=1e-12)
     with pytest.raises(ValueError, match="residual_max_push_m = 0.0"):
         BuildRlfdDiagram(no_push, model, RlfdDiagramConfig(composition="pure"))
+
+
+def test_a_phase_stopped_dmp_waits_while_the_fixture_holds_the_part_back(peg):
+    """With phase stopping the controller's tracking error reaches the DMP: free motion
+    (lag under the deadband) keeps the paper's phase; a peg landing 6 mm beside its
+    hole holds the set-point back, so the phase decays far slower than open loop."""
+    task, model, X_WP_start = peg
+    stopped = dataclasses.replace(
+        task, dmp_phase_stop_gain_per_m2=1e6, dmp_phase_stop_deadband_m=0.0015
+    )
+    rlfd = BuildRlfdDiagram(
+        stopped,
+        model,
+        RlfdDiagramConfig(log_period_s=None),
+        fixture_error=RigidTransform([0.006, 0.0, 0.0]),
+    )
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.zeros(6))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.Initialize()
+    dmp_context = rlfd.dmp.GetMyContextFromRoot(context)
+
+    def open_loop_phase(t):
+        return np.exp(-model.config.alpha_x * t / model.tau)
+
+    simulator.AdvanceTo(2.0)  # free motion
+    assert rlfd.dmp.time_scale(dmp_context) == 1.0
+    assert rlfd.dmp.GetOutputPort("phase").Eval(dmp_context)[0] == pytest.approx(
+        open_loop_phase(2.0), rel=1e-9
+    )
+    simulator.AdvanceTo(EPISODE_S)
+    assert rlfd.dmp.time_scale(dmp_context) > 10.0
+    phase = rlfd.dmp.GetOutputPort("phase").Eval(dmp_context)[0]
+    assert phase > 2.0 * open_loop_phase(EPISODE_S)

@@ -95,3 +95,54 @@ def test_set_start_pose_survives_initialize(model):
     simulator.Initialize()
     ro = dmp.rollout(model, start_p, start_q, dt=0.01, duration=0.5)
     compare(system, simulator, ro, n_steps=50)
+
+
+def test_phase_stop_time_scale_is_one_plus_gain_times_excess_squared():
+    assert dmp.phase_stop_time_scale(np.array([0.003, 0.0, 0.004]), 0.0, 0.0) == 1.0
+    assert dmp.phase_stop_time_scale(np.array([0.001, 0.0, 0.0]), 1e6, 0.0015) == 1.0
+    # |e| = 5 mm, 3 mm past a 2 mm deadband: 1 + 1e6 * (3e-3)^2 = 10.
+    scale = dmp.phase_stop_time_scale(np.array([0.003, 0.0, 0.004]), 1e6, 0.002)
+    assert scale == pytest.approx(10.0, rel=1e-12)
+    with pytest.raises(ValueError, match="gain_per_m2"):
+        dmp.phase_stop_time_scale(np.zeros(3), -1.0)
+    with pytest.raises(ValueError, match="deadband_m"):
+        dmp.phase_stop_time_scale(np.zeros(3), 1.0, float("nan"))
+    with pytest.raises(ValueError, match="tracking_error_m"):
+        dmp.phase_stop_time_scale(np.array([np.nan, 0.0, 0.0]), 1.0)
+    with pytest.raises(ValueError, match="tracking_error_m"):
+        dmp.phase_stop_time_scale(np.zeros(2), 1.0)
+
+
+def build_with_tracking_error(model, error, **kwargs):
+    builder = DiagramBuilder()
+    system = builder.AddSystem(DmpSystem(model, **kwargs))
+    src = builder.AddSystem(ConstantVectorSource(error))
+    builder.Connect(src.get_output_port(), system.GetInputPort("tracking_error"))
+    simulator = Simulator(builder.Build())
+    simulator.Initialize()
+    return system, simulator
+
+
+def test_phase_stopping_runs_the_whole_dmp_with_a_longer_tau(model):
+    # A constant error 2 mm past the deadband: tau x (1 + 2.5e5 * 4e-6) = tau x 2, so the
+    # phase-stopped DMP is the open-loop DMP with twice the demonstration's tau.
+    error = np.array([0.0, 0.003, 0.0])
+    system, simulator = build_with_tracking_error(
+        model, error, phase_stop_gain_per_m2=2.5e5, phase_stop_deadband_m=0.001
+    )
+    ro = dmp.rollout(model, dt=0.01, duration=1.0, tau=2.0 * model.tau)
+    compare(system, simulator, ro, n_steps=100)
+    ctx = system.GetMyContextFromRoot(simulator.get_context())
+    assert system.time_scale(ctx) == pytest.approx(2.0, rel=1e-12)
+    assert system.phase_stop_gain_per_m2 == 2.5e5
+
+
+def test_phase_stopping_off_or_within_the_deadband_is_the_paper_dmp(model):
+    ro = dmp.rollout(model, dt=0.01, duration=1.0)
+    for kwargs in ({}, {"phase_stop_gain_per_m2": 1e6, "phase_stop_deadband_m": 0.005}):
+        system, simulator = build_with_tracking_error(model, np.array([0.0, 0.0, 0.004]), **kwargs)
+        compare(system, simulator, ro, n_steps=100)
+    with pytest.raises(ValueError, match="gain_per_m2"):
+        DmpSystem(model, phase_stop_gain_per_m2=-1.0)
+    with pytest.raises(ValueError, match="deadband_m"):
+        DmpSystem(model, phase_stop_gain_per_m2=1.0, phase_stop_deadband_m=-0.001)

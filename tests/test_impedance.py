@@ -211,3 +211,28 @@ def test_rejects_wrong_model_and_reports_cost():
     print(f"CartesianImpedanceController.CalcTorque: {per_call_us:.1f} us per call")
     assert tau.shape == (7,)
     assert np.all(np.isfinite(tau))
+
+
+def test_tracking_error_output_is_the_translational_error_of_the_last_update():
+    control_plant = MakePandaControlModel(X_HE, PAYLOAD_MASS_KG, PAYLOAD_COM_H)
+    controller = CartesianImpedanceController(control_plant)
+    ctx = control_plant.CreateDefaultContext()
+    control_plant.SetPositions(ctx, PANDA_HOME_Q)
+    X_WE = control_plant.GetFrameByName("controlled_frame_E").CalcPoseInWorld(ctx)
+    dp = np.array([0.003, -0.002, 0.001])
+    context = controller.CreateDefaultContext()
+    controller.GetInputPort("panda_state").FixValue(
+        context, np.concatenate([PANDA_HOME_Q, np.zeros(7)])
+    )
+    desired = np.concatenate([X_WE.translation() + dp, X_WE.rotation().ToQuaternion().wxyz()])
+    controller.GetInputPort("X_WE_desired").FixValue(context, desired)
+    controller.GetInputPort("V_WE_desired").FixValue(context, np.zeros(6))
+    np.testing.assert_array_equal(controller.GetOutputPort("tracking_error").Eval(context), 0.0)
+    simulator = Simulator(controller, context)
+    simulator.Initialize()  # the initialisation update computes torque and error
+    error = controller.GetOutputPort("tracking_error").Eval(simulator.get_context())
+    np.testing.assert_allclose(error, dp, atol=1e-12)
+    assert not controller.HasDirectFeedthrough(
+        controller.GetInputPort("X_WE_desired").get_index(),
+        controller.GetOutputPort("tracking_error").get_index(),
+    )

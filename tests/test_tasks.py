@@ -224,12 +224,26 @@ def test_the_fast_residual_variants_change_only_the_residual_period(name):
     assert dataclasses.replace(variant, name=shipped.name, residual_period_s=0.1) == shipped
 
 
+@pytest.mark.parametrize(
+    "field", ["residual_max_push_m", "dmp_phase_stop_gain_per_m2", "dmp_phase_stop_deadband_m"]
+)
 @pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
-def test_bad_push_bound(tmp_path, value):
-    path = _write_variant(tmp_path, lambda d: d.update({"residual_max_push_m": value}))
+def test_bad_non_negative_task_field(tmp_path, field, value):
+    path = _write_variant(tmp_path, lambda d: d.update({field: value}))
     message = "must be non-negative" if math.isfinite(value) else "expected a finite number"
-    with pytest.raises(ValueError, match=rf"residual_max_push_m.*{message}"):
+    with pytest.raises(ValueError, match=rf"{field}.*{message}"):
         load_task(path, check_demo=False)
+
+
+def test_the_phase_stop_variant_changes_only_the_dmp_phase_stopping():
+    shipped = load_task("rj45", check_demo=False)
+    variant = load_task(tasks_dir() / "variants" / "rj45_phase_stop.yaml")
+    assert shipped.dmp_phase_stop_gain_per_m2 == 0.0
+    assert variant.dmp_phase_stop_gain_per_m2 > 0.0 and variant.dmp_phase_stop_deadband_m > 0.0
+    same = dataclasses.replace(
+        variant, name=shipped.name, dmp_phase_stop_gain_per_m2=0.0, dmp_phase_stop_deadband_m=0.0
+    )
+    assert same == shipped
 
 
 def test_soft_wrist_variants_change_only_the_stiffness():

@@ -26,6 +26,7 @@ class DmpSystem(LeafSystem):
         input_ports:
         - coupling (optional)
         - X_WE_start (optional)
+        - tracking_error (optional)
         output_ports:
         - X_WE_desired
         - V_WE_desired
@@ -40,14 +41,20 @@ class DmpSystem(LeafSystem):
           robot's current pose. When unconnected, the start stored in the state is kept
           (the demonstration's start in a default context, or the one given to
           :meth:`SetStartPose`).
+        - ``tracking_error`` (3): the controller's set-point minus the measured position of
+          E (m), read by each update when ``phase_stop_gain_per_m2 > 0``: the next step
+          runs with ``tau (1 + gain max(0, |e| - deadband)^2)`` (phase stopping, see
+          :func:`rlfd_drake.dmp.phase_stop_time_scale`); unconnected is no slowing.
         - ``X_WE_desired`` (7): ``[p_WE (3) m, q_WE (4) wxyz]`` of the DMP.
         - ``V_WE_desired`` (6): spatial velocity in Drake order ``[w_WE (3) rad/s;
           v_WE (3) m/s]``, both in the world frame.
         - ``phase`` (1): canonical-system phase ``x`` (1 at the start, decays to 0).
 
     State: one discrete group of size :data:`rlfd_drake.dmp.STATE_SIZE` (21) with the flat
-    DMP state ``[y (3), z (3), q (4), eta (3), x (1), y0 (3), q0 (4)]``, updated by a
-    periodic event (offset 0). Outputs read only that state (no direct feedthrough).
+    DMP state ``[y (3), z (3), q (4), eta (3), x (1), y0 (3), q0 (4)]``, and a second of
+    size 1 with the time scale of the last step (1 without phase stopping), both updated
+    by a periodic event (offset 0). Outputs read only that state (no direct feedthrough,
+    so ``tracking_error`` may come from a controller downstream).
 
     Timing: the periodic update at ``t_k = k * period_s`` computes the sample at
     ``t_{k+1}`` (one-period preview, zero-order hold of the *next* sample). Right after
@@ -64,6 +71,8 @@ class DmpSystem(LeafSystem):
         goal_position: np.ndarray | None = None,
         goal_quat: np.ndarray | None = None,
         tau: float | None = None,
+        phase_stop_gain_per_m2: float = 0.0,
+        phase_stop_deadband_m: float = 0.0,
     ) -> None:
         """
         Args:
@@ -72,6 +81,9 @@ class DmpSystem(LeafSystem):
             goal_position: goal (m), shape (3,); default the demonstration's.
             goal_quat: goal [w, x, y, z], shape (4,); default the demonstration's.
             tau: temporal scaling (s); default the demonstration's duration.
+            phase_stop_gain_per_m2: ``alpha_px`` of phase stopping (1/m^2); 0 (the
+                paper's DMP) ignores ``tracking_error``.
+            phase_stop_deadband_m: tracking error (m) below which the DMP is not slowed.
         """
         super().__init__()
         if not (np.isfinite(period_s) and period_s > 0.0):
@@ -84,13 +96,22 @@ class DmpSystem(LeafSystem):
         self._tau = model.tau if tau is None else float(tau)
         # Validates tau and the period once, at construction.
         dmp._step_constants(model.config, self._period, self._tau)
+        # Validates the gain and the deadband once, at construction.
+        dmp.phase_stop_time_scale(np.zeros(3), phase_stop_gain_per_m2, phase_stop_deadband_m)
+        self._phase_stop_gain = float(phase_stop_gain_per_m2)
+        self._phase_stop_deadband = float(phase_stop_deadband_m)
 
         self._state_index = self.DeclareDiscreteState(dmp.initial_state(model))
         self._coupling_port = self.DeclareVectorInputPort("coupling", 6)
+        self._time_scale_index = self.DeclareDiscreteState(np.ones(1))
         self._start_port = self.DeclareVectorInputPort("X_WE_start", 7)
+        self._tracking_error_port = self.DeclareVectorInputPort("tracking_error", 3)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
-        state_ticket = {self.discrete_state_ticket(self._state_index)}
+        state_ticket = {
+            self.discrete_state_ticket(self._state_index),
+            self.discrete_state_ticket(self._time_scale_index),
+        }
         self.DeclareVectorOutputPort(
             "X_WE_desired", 7, self._calc_pose, prerequisites_of_calc=state_ticket
         )
@@ -116,6 +137,15 @@ class DmpSystem(LeafSystem):
         """Temporal scaling (s)."""
         return self._tau
 
+    @property
+    def phase_stop_gain_per_m2(self) -> float:
+        """``alpha_px`` of phase stopping (1/m^2); 0 is off."""
+        return self._phase_stop_gain
+
+    def time_scale(self, context: Context) -> float:
+        """The factor on ``tau`` of the last step in ``context`` (1 without slowing)."""
+        return float(context.get_discrete_state(self._time_scale_index).get_value()[0])
+
     def SetStartPose(self, context: Context, position: np.ndarray, quat: np.ndarray) -> None:
         """Reset the DMP in ``context`` to rest at ``[position (3) m, quat (4) wxyz]``.
 
@@ -124,6 +154,7 @@ class DmpSystem(LeafSystem):
         """
         state = dmp.initial_state(self._model, position, quat)
         context.SetDiscreteState(self._state_index, state)
+        context.SetDiscreteState(self._time_scale_index, np.ones(1))
 
     def _initialize(self, context: Context, discrete_state: DiscreteValues) -> EventStatus:
         if self._start_port.HasValue(context):
@@ -133,12 +164,20 @@ class DmpSystem(LeafSystem):
             old = context.get_discrete_state(self._state_index).get_value()
             state = dmp.initial_state(self._model, old[dmp.START_POSITION], old[dmp.START_QUAT])
         discrete_state.set_value(self._state_index, state)
+        discrete_state.set_value(self._time_scale_index, np.ones(1))
         return EventStatus.Succeeded()
 
     def _update(self, context: Context, discrete_state: DiscreteValues) -> EventStatus:
         coupling = (
             self._coupling_port.Eval(context) if self._coupling_port.HasValue(context) else None
         )
+        scale = 1.0
+        if self._phase_stop_gain > 0.0 and self._tracking_error_port.HasValue(context):
+            scale = dmp.phase_stop_time_scale(
+                self._tracking_error_port.Eval(context),
+                self._phase_stop_gain,
+                self._phase_stop_deadband,
+            )
         state = context.get_discrete_state(self._state_index).get_value()
         new = dmp.dmp_step(
             state,
@@ -146,10 +185,11 @@ class DmpSystem(LeafSystem):
             self._period,
             self._goal_position,
             self._goal_quat,
-            self._tau,
+            self._tau * scale,
             coupling,
         )
         discrete_state.set_value(self._state_index, new)
+        discrete_state.set_value(self._time_scale_index, np.array([scale]))
         return EventStatus.Succeeded()
 
     def _state(self, context: Context) -> np.ndarray:
@@ -161,7 +201,8 @@ class DmpSystem(LeafSystem):
 
     def _calc_velocity(self, context: Context, output: BasicVector) -> None:
         s = self._state(context)
-        output.SetFromVector(np.concatenate([s[dmp.ETA], s[dmp.VELOCITY]]) / self._tau)
+        tau = self._tau * self.time_scale(context)
+        output.SetFromVector(np.concatenate([s[dmp.ETA], s[dmp.VELOCITY]]) / tau)
 
     def _calc_phase(self, context: Context, output: BasicVector) -> None:
         output.SetAtIndex(0, self._state(context)[dmp.PHASE])

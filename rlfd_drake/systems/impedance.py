@@ -139,11 +139,14 @@ class CartesianImpedanceController(LeafSystem):
         - V_WE_desired
         output_ports:
         - panda_torque
+        - tracking_error
 
     * ``panda_state`` (14): q (rad) then v (rad/s) of the 7 arm joints.
     * ``X_WE_desired`` (7): desired pose of E, position (m) then quaternion [w, x, y, z].
     * ``V_WE_desired`` (6): desired spatial velocity of E, [w (rad/s); v (m/s)], world.
     * ``panda_torque`` (7): joint torques, N m, clipped to the torque limits.
+    * ``tracking_error`` (3): ``p_d - p_WE`` (m, world) of the last update, the
+      translational error the torque was computed from (read by a phase-stopped DMP).
 
     The torque is computed into the discrete state at each periodic update (and at
     initialisation) and the output reads the state: a sampled controller with a
@@ -187,9 +190,11 @@ class CartesianImpedanceController(LeafSystem):
         self._X_port = self.DeclareVectorInputPort("X_WE_desired", 7)
         self._V_port = self.DeclareVectorInputPort("V_WE_desired", 6)
         state_index = self.DeclareDiscreteState(7)
+        self._error_index = self.DeclareDiscreteState(3)
         self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, 0.0, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         self.DeclareStateOutputPort("panda_torque", state_index)
+        self.DeclareStateOutputPort("tracking_error", self._error_index)
 
     def _damping(self) -> np.ndarray:
         """(6,) critical damping at the posture stored in the scratch context."""
@@ -240,3 +245,4 @@ class CartesianImpedanceController(LeafSystem):
         if not np.all(np.isfinite(tau)):
             raise RuntimeError(f"CartesianImpedanceController: non-finite torque {tau}")
         discrete_state.set_value(0, tau)
+        discrete_state.set_value(self._error_index, self._error[3:])
