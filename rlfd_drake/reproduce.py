@@ -466,9 +466,12 @@ _SLOPE_TEACHER_FLAGS = (
 #: rj45 with the residual at 20 Hz instead of the paper's 10 Hz (a deviation):
 #: results/rj45_study.md, last section.
 _RJ45_FAST_RESIDUAL = "models/tasks/variants/rj45_fast_residual.yaml"
+#: rj45 whose DMP slows while the controller lags it (phase stopping, a deviation):
+#: results/rj45_study.md, last section.
+_RJ45_PHASE_STOP = "models/tasks/variants/rj45_phase_stop.yaml"
 # The same one-run recipe copying the search with the table slope's constant turn
-# (base_correction "force_search_and_slope"), on rj45 and its 20 Hz variant:
-# results/rj45_study.md, the last two sections.
+# (base_correction "force_search_and_slope"), on rj45 and its 20 Hz and phase-stopped
+# variants: results/rj45_study.md, the last three sections.
 RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
     task: _run(
         f"runs/{Path(task).stem}_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e1400_s0",
@@ -477,7 +480,7 @@ RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
         _SLOPE_TEACHER_FLAGS,
         "ppo",
     )
-    for task in ("rj45", _RJ45_FAST_RESIDUAL)
+    for task in ("rj45", _RJ45_FAST_RESIDUAL, _RJ45_PHASE_STOP)
 }
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
@@ -1156,6 +1159,29 @@ TABLES["rj45_residual_rate"] = Table(
     "160 starts of RJ-45's grid, whatever the budget; training seed 0 (other seeds: "
     "results/seeds_*fsslope*.md). The paper's figures are its physical robot (Table IV: "
     "DMP 0 %, PPO / PPO 70.6 %).",
+    evaluation_episodes=160,
+)
+
+_PHASE_STOP_COLUMNS = {"rj45, open-loop DMP": "rj45", "rj45, phase-stopped DMP": _RJ45_PHASE_STOP}
+TABLES["rj45_phase_stop"] = Table(
+    "RJ-45 with the paper's open-loop DMP and with a phase-stopped DMP (mean action)",
+    _PHASE_STOP_COLUMNS,
+    [
+        Row("DMP alone", "dmp", dict.fromkeys(_PHASE_STOP_COLUMNS, 0.0)),
+        Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
+        *_slope_teacher_rows(
+            "PPO from that copy, 1,400 episodes, step size falling to zero",
+            dict.fromkeys(_PHASE_STOP_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"]),
+        ),
+    ],
+    "The shipped rj45, and models/tasks/variants/rj45_phase_stop.yaml: the same task "
+    "whose DMP runs with tau (1 + 1e5 max(0, |e| - 1.5 mm)^2), e the impedance "
+    "controller's translational tracking error (phase stopping, Ijspeert et al. 2013; a "
+    "deviation from the paper, whose DMP runs open loop), so it waits while the socket "
+    "holds the plug back. The PPO rows are the rj45_imitation table's slope-teacher "
+    "recipe, unchanged, on each column's task. All 160 starts of RJ-45's grid, whatever "
+    "the budget; training seed 0 (other seeds: results/seeds_*fsslope*.md). The paper's "
+    "figures are its physical robot (Table IV: DMP 0 %, PPO / PPO 70.6 %).",
     evaluation_episodes=160,
 )
 

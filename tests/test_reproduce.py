@@ -662,22 +662,31 @@ def test_the_slope_teacher_row_trains_what_the_study_ran():
     assert "Force-guided search + the slope's constant turn" in labels
 
 
-def test_the_residual_rate_table_trains_the_slope_recipe_on_the_20_hz_variant():
-    """rj45_study.md's last section: the slope-teacher recipe, unchanged, on rj45 with a
-    20 Hz residual; the variant's command differs from rj45's only in task and folder."""
+@pytest.mark.parametrize(
+    ("table_name", "column", "field", "value"),
+    [
+        ("rj45_residual_rate", "rj45, 20 Hz residual", "residual_period_s", 0.05),
+        ("rj45_phase_stop", "rj45, phase-stopped DMP", "dmp_phase_stop_gain_per_m2", 1e5),
+    ],
+)
+def test_the_rj45_variant_tables_train_the_slope_recipe_on_their_variant(
+    table_name, column, field, value
+):
+    """rj45_study.md's last sections: the slope-teacher recipe, unchanged, on a variant
+    of rj45; the variant's command differs from rj45's only in task and folder."""
     from rlfd_drake.cli import build_parser
     from rlfd_drake.tasks import load_task
 
-    table = reproduce.TABLES["rj45_residual_rate"]
-    fast = table.columns["rj45, 20 Hz residual"]
-    assert table.columns["rj45, 10 Hz residual"] == "rj45"
-    assert load_task(fast).residual_period_s == 0.05
+    table = reproduce.TABLES[table_name]
+    variant_task = table.columns[column]
+    assert list(table.columns.values()) == ["rj45", variant_task]
+    assert getattr(load_task(variant_task), field) == value
     runs = reproduce.RUNS["ppo_imitate_fs_slope_lrlin_1400"]
     parser = build_parser()
     shipped = vars(parser.parse_args(runs["rj45"][1].split()[1:]))
-    variant = vars(parser.parse_args(runs[fast][1].split()[1:]))
-    assert variant["task"] == fast and variant["out"] == runs[fast][0]
-    assert runs[fast][0].startswith("runs/rj45_fast_residual_")
+    variant = vars(parser.parse_args(runs[variant_task][1].split()[1:]))
+    assert variant["task"] == variant_task and variant["out"] == runs[variant_task][0]
+    assert runs[variant_task][0].startswith(f"runs/{Path(variant_task).stem}_ppo_")
     differ = {k for k in shipped if shipped[k] != variant[k]}
     assert differ == {"task", "out"}
     assert table.evaluation_episodes == 160
