@@ -1139,50 +1139,52 @@ TABLES["rj45_imitation"] = Table(
     evaluation_episodes=160,
 )
 
-_RATE_COLUMNS = {"rj45, 10 Hz residual": "rj45", "rj45, 20 Hz residual": _RJ45_FAST_RESIDUAL}
-TABLES["rj45_residual_rate"] = Table(
-    "RJ-45 with the residual at the paper's 10 Hz and at 20 Hz (mean action)",
-    _RATE_COLUMNS,
-    [
-        Row("DMP alone", "dmp", dict.fromkeys(_RATE_COLUMNS, 0.0)),
-        Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
-        *_slope_teacher_rows(
-            "PPO from that copy, 1,400 episodes, step size falling to zero",
-            dict.fromkeys(_RATE_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"]),
-        ),
-    ],
-    "The shipped rj45 with the residual policy at the paper's 10 Hz, and "
-    "models/tasks/variants/rj45_fast_residual.yaml: the same task with the residual at "
-    "20 Hz (residual_period_s 0.05; a deviation from the paper, whose policy runs at "
-    "10 Hz). The DMP alone is the same on both (no residual). The PPO rows are the "
-    "rj45_imitation table's slope-teacher recipe, unchanged, on each column's task. All "
-    "160 starts of RJ-45's grid, whatever the budget; training seed 0 (other seeds: "
-    "results/seeds_*fsslope*.md). The paper's figures are its physical robot (Table IV: "
-    "DMP 0 %, PPO / PPO 70.6 %).",
-    evaluation_episodes=160,
-)
 
-_PHASE_STOP_COLUMNS = {"rj45, open-loop DMP": "rj45", "rj45, phase-stopped DMP": _RJ45_PHASE_STOP}
-TABLES["rj45_phase_stop"] = Table(
+def _rj45_variant_table(
+    title: str, labels: tuple[str, str], variant: str, what: str, shipped: str
+) -> Table:
+    """The slope-teacher recipe, unchanged, on the shipped rj45 and on one of its variants
+    (``variant``, a YAML path), with the DMP and the search; ``labels`` name the two
+    columns, ``shipped`` and ``what`` say how each runs."""
+    columns = {labels[0]: "rj45", labels[1]: variant}
+    return Table(
+        title,
+        columns,
+        [
+            Row("DMP alone", "dmp", dict.fromkeys(columns, 0.0)),
+            Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
+            *_slope_teacher_rows(
+                "PPO from that copy, 1,400 episodes, step size falling to zero",
+                dict.fromkeys(columns, _PAPER_FULL_POSE_RLFD["rj45"]),
+            ),
+        ],
+        f"The shipped rj45{shipped}, and {variant}: {what} The PPO rows are the rj45_imitation "
+        "table's slope-teacher recipe, unchanged, on each column's task. All 160 starts of "
+        "RJ-45's grid, whatever the budget; training seed 0 (other seeds: "
+        "results/seeds_*fsslope*.md). The paper's figures are its physical robot (Table "
+        "IV: DMP 0 %, PPO / PPO 70.6 %).",
+        evaluation_episodes=160,
+    )
+
+
+TABLES["rj45_residual_rate"] = _rj45_variant_table(
+    "RJ-45 with the residual at the paper's 10 Hz and at 20 Hz (mean action)",
+    ("rj45, 10 Hz residual", "rj45, 20 Hz residual"),
+    _RJ45_FAST_RESIDUAL,
+    "the same task with the residual at 20 Hz (residual_period_s 0.05; a deviation from "
+    "the paper, whose policy runs at 10 Hz). The DMP alone is the same on both (no "
+    "residual).",
+    shipped=" with the residual policy at the paper's 10 Hz",
+)
+TABLES["rj45_phase_stop"] = _rj45_variant_table(
     "RJ-45 with the paper's open-loop DMP and with a phase-stopped DMP (mean action)",
-    _PHASE_STOP_COLUMNS,
-    [
-        Row("DMP alone", "dmp", dict.fromkeys(_PHASE_STOP_COLUMNS, 0.0)),
-        Row("Force-guided search (hand-written, not in the paper)", "force_search", {}),
-        *_slope_teacher_rows(
-            "PPO from that copy, 1,400 episodes, step size falling to zero",
-            dict.fromkeys(_PHASE_STOP_COLUMNS, _PAPER_FULL_POSE_RLFD["rj45"]),
-        ),
-    ],
-    "The shipped rj45, and models/tasks/variants/rj45_phase_stop.yaml: the same task "
-    "whose DMP runs with tau (1 + 1e5 max(0, |e| - 1.5 mm)^2), e the impedance "
-    "controller's translational tracking error (phase stopping, Ijspeert et al. 2013; a "
-    "deviation from the paper, whose DMP runs open loop), so it waits while the socket "
-    "holds the plug back. The PPO rows are the rj45_imitation table's slope-teacher "
-    "recipe, unchanged, on each column's task. All 160 starts of RJ-45's grid, whatever "
-    "the budget; training seed 0 (other seeds: results/seeds_*fsslope*.md). The paper's "
-    "figures are its physical robot (Table IV: DMP 0 %, PPO / PPO 70.6 %).",
-    evaluation_episodes=160,
+    ("rj45, open-loop DMP", "rj45, phase-stopped DMP"),
+    _RJ45_PHASE_STOP,
+    "the same task whose DMP runs with tau (1 + 1e5 max(0, |e| - 1.5 mm)^2), e the "
+    "impedance controller's translational tracking error (phase stopping, Ijspeert et al. "
+    "2013; a deviation from the paper, whose DMP runs open loop), so it waits while the "
+    "socket holds the plug back.",
+    shipped=" with the paper's open-loop DMP",
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.
