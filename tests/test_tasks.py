@@ -235,11 +235,26 @@ def test_bad_non_negative_task_field(tmp_path, field, value):
         load_task(path, check_demo=False)
 
 
-def test_the_phase_stop_variant_changes_only_the_dmp_phase_stopping():
-    shipped = load_task("rj45", check_demo=False)
-    variant = load_task(tasks_dir() / "variants" / "rj45_phase_stop.yaml")
+@pytest.mark.parametrize(
+    "shipped_name, variant_name, gain_per_m2",
+    [
+        ("rj45", "rj45_phase_stop", 1e5),
+        ("rj45", "rj45_phase_stop_strong", 1e6),
+        ("variants/peg_incremental", "peg_incremental_phase_stop", 1e5),
+        ("variants/peg_incremental", "peg_incremental_phase_stop_strong", 1e6),
+        ("variants/gear_incremental", "gear_incremental_phase_stop", 1e5),
+    ],
+)
+def test_the_phase_stop_variants_change_only_the_dmp_phase_stopping(
+    shipped_name, variant_name, gain_per_m2
+):
+    """Each phase-stop variant is its task with the DMP slowed past a 1.5 mm tracking
+    error: same starts and errors, so evaluations compare start by start."""
+    shipped = load_task(tasks_dir() / f"{shipped_name}.yaml", check_demo=False)
+    variant = load_task(tasks_dir() / "variants" / f"{variant_name}.yaml")
     assert shipped.dmp_phase_stop_gain_per_m2 == 0.0
-    assert variant.dmp_phase_stop_gain_per_m2 > 0.0 and variant.dmp_phase_stop_deadband_m > 0.0
+    assert variant.dmp_phase_stop_gain_per_m2 == gain_per_m2
+    assert variant.dmp_phase_stop_deadband_m == 0.0015
     same = dataclasses.replace(
         variant, name=shipped.name, dmp_phase_stop_gain_per_m2=0.0, dmp_phase_stop_deadband_m=0.0
     )
