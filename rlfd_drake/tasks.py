@@ -523,11 +523,56 @@ def _validate(task: TaskSpec) -> None:
         )
 
 
+def _merged(base: dict, changes: dict) -> dict:
+    """``base`` with ``changes`` laid over it: mappings merge key by key, anything else
+    (numbers, lists, null) replaces the base's value."""
+    merged = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merged(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def _read_task_data(path: Path, chain: tuple[Path, ...]) -> dict:
+    """The YAML mapping of a task file, with its ``based_on`` chain resolved.
+
+    A variant names its base task in ``based_on``: a shipped task name or a path
+    relative to the variant's own folder. The variant holds only what it changes, so
+    a fix to the base reaches every variant and a variant's file shows its difference.
+    """
+    data = yaml.safe_load(path.read_text())
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping at the top level")
+    if "based_on" not in data:
+        return data
+    changes = dict(data)
+    base_name = changes.pop("based_on")
+    if not isinstance(base_name, str) or not base_name:
+        raise ValueError(f"{path}: based_on must name a task or a YAML file, got {base_name!r}")
+    if "name" not in changes:
+        raise ValueError(f"{path}: a task based on {base_name!r} must give its own name")
+    if base_name.endswith((".yaml", ".yml")):
+        base_path = (path.parent / base_name).resolve()
+    else:
+        base_path = tasks_dir() / f"{base_name}.yaml"
+    if not base_path.exists():
+        raise ValueError(f"{path}: based_on {base_name!r}: no such task file {base_path}")
+    chain = (*chain, path.resolve())
+    if base_path.resolve() in chain:
+        loop = " -> ".join(p.name for p in (*chain, base_path))
+        raise ValueError(f"{path}: based_on {base_name!r} makes a loop: {loop}")
+    return _merged(_read_task_data(base_path, chain), changes)
+
+
 def load_task(name_or_path: str | Path, check_demo: bool = True) -> TaskSpec:
     """Loads and validates a task.
 
     Args:
         name_or_path: a shipped task name (see ``list_tasks()``) or a path to a YAML file.
+            A file may name a base task in ``based_on`` and hold only its changes
+            (mappings merge field by field; ``models/tasks/variants/`` are written so).
         check_demo: if True, the demonstration file named by ``demo`` must exist.
 
     Raises:
@@ -541,9 +586,7 @@ def load_task(name_or_path: str | Path, check_demo: bool = True) -> TaskSpec:
             raise ValueError(f"unknown task {name_or_path!r}; known: {', '.join(list_tasks())}")
     elif not path.exists():
         raise ValueError(f"task file {path} does not exist")
-    data = yaml.safe_load(path.read_text())
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping at the top level")
+    data = _read_task_data(path, ())
     task = _from_dict(TaskSpec, data, "")
     assert isinstance(task, TaskSpec)
     task = dataclasses.replace(task, source=path)

@@ -355,3 +355,71 @@ def test_the_wide_error_training_variants_change_only_one_fixture_error_bound(
         fixture_error=dataclasses.replace(wide.fixture_error, **{field: shipped_value}),
     )
     assert narrowed == task
+
+
+def test_a_variant_based_on_a_task_merges_its_changes_field_by_field(tmp_path):
+    """``based_on``: nested mappings merge key by key (the other fixture-error bounds
+    stay the base's), lists and scalars replace, and a relative path is read from the
+    variant's folder."""
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "wide.yaml").write_text(
+        "based_on: peg\nname: wide\nfixture_error:\n  position_bound_m: [0.003, 0.003, 0.0]\n"
+    )
+    (tmp_path / "sub" / "wide_slow.yaml").write_text(
+        "based_on: wide.yaml\nname: wide_slow\nepisode_time_s: 12.0\n"
+    )
+    peg = load_task("peg")
+    wide_slow = load_task(tmp_path / "sub" / "wide_slow.yaml")
+    assert wide_slow.episode_time_s == 12.0
+    assert wide_slow.fixture_error.position_bound_m == (0.003, 0.003, 0.0)
+    assert wide_slow.fixture_error.rotation_bound_deg == peg.fixture_error.rotation_bound_deg
+    assert (
+        dataclasses.replace(
+            wide_slow,
+            name="peg",
+            episode_time_s=peg.episode_time_s,
+            fixture_error=peg.fixture_error,
+        )
+        == peg
+    )
+
+
+@pytest.mark.parametrize(
+    "files, pattern",
+    [
+        ({"v.yaml": "based_on: 3\nname: v\n"}, r"based_on must name a task or a YAML file, got 3"),
+        ({"v.yaml": "based_on: nowhere.yaml\nname: v\n"}, r"based_on 'nowhere.yaml': no such"),
+        ({"v.yaml": "based_on: nothing\nname: v\n"}, r"based_on 'nothing': no such task"),
+        ({"v.yaml": "based_on: peg\nkappa_m: 0.001\n"}, r"must give its own name"),
+        ({"v.yaml": "based_on: peg\nname: v\nkapa_m: 0.001\n"}, r"unknown field kapa_m"),
+        ({"v.yaml": "based_on: peg\nname: v\nkappa_m: -1.0\n"}, r"kappa_m must be positive"),
+        (
+            {"v.yaml": "based_on: w.yaml\nname: v\n", "w.yaml": "based_on: v.yaml\nname: w\n"},
+            r"makes a loop: v.yaml -> w.yaml -> v.yaml",
+        ),
+    ],
+)
+def test_a_bad_based_on_is_refused_with_a_named_error(tmp_path, files, pattern):
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    with pytest.raises(ValueError, match=pattern):
+        load_task(tmp_path / "v.yaml")
+
+
+def test_every_variant_file_holds_only_its_changes():
+    """Each variant names its base and repeats none of the base's values, so a fix to a
+    task reaches its variants and a variant's file reads as its difference."""
+    for path in sorted((tasks_dir() / "variants").glob("*.yaml")):
+        data = yaml.safe_load(path.read_text())
+        assert "based_on" in data, path
+        variant = load_task(path)
+        base = load_task((path.parent / data["based_on"]).resolve())
+        for key, value in data.items():
+            if key in ("based_on", "name"):
+                continue
+            inner_keys = value if isinstance(value, dict) else [None]
+            for inner in inner_keys:
+                mine, theirs = getattr(variant, key), getattr(base, key)
+                if inner is not None:
+                    mine, theirs = getattr(mine, inner), getattr(theirs, inner)
+                assert mine != theirs, f"{path}: {key} {inner or ''} repeats the base's value"
