@@ -32,6 +32,7 @@ __all__ = [
     "add_base_correction",
     "applied_residual_mode",
     "check_base_correction",
+    "check_offset_rule",
     "make_base_correction",
 ]
 
@@ -45,12 +46,32 @@ def _force_search_and_slope(task: TaskSpec | None) -> SplitResidualPolicy:
     return SplitResidualPolicy(ForceGuidedSearch(), slope_residual(task))
 
 
+def _slope(task: TaskSpec | None):
+    if not isinstance(task, TaskSpec):
+        raise ValueError(f"slope needs the task (its table slope), got {task!r}")
+    return slope_residual(task)
+
+
 #: Name -> factory of a stateless correction rule (obs -> 6-D residual in [-1, 1]) on
 #: a task.
 BASE_CORRECTIONS: dict[str, Callable[[TaskSpec | None], Callable[[np.ndarray], np.ndarray]]] = {
     "force_search": lambda task: ForceGuidedSearch(),
     "force_search_and_slope": _force_search_and_slope,
+    # Only the constant turn that undoes the table's slope: no translation.
+    "slope": _slope,
 }
+
+
+def check_offset_rule(name: str, task: TaskSpec | None) -> None:
+    """ValueError unless ``task``'s residual is an offset: the hand-written rules name
+    the offset they want, and on a rate residual (``residual_rate_per_s``) the same
+    action would be integrated into a drift to the range's end."""
+    if isinstance(task, TaskSpec) and task.residual_rate_per_s is not None:
+        raise ValueError(
+            f"the rule {name!r} gives a residual offset, but task {task.name!r} integrates "
+            f"its residual as a rate (residual_rate_per_s={task.residual_rate_per_s}); "
+            "use the task it is based on"
+        )
 
 
 def check_base_correction(name: str) -> None:
@@ -63,6 +84,7 @@ def make_base_correction(name: str, task: TaskSpec | None = None):
     """A new instance of the rule ``name`` on ``task`` (None for rules that do not read
     it); ValueError naming an unknown rule, or a missing task a rule needs."""
     check_base_correction(name)
+    check_offset_rule(name, task)
     return BASE_CORRECTIONS[name](task)
 
 

@@ -45,7 +45,7 @@ from rlfd_drake.systems.residual_integrator import (
 from rlfd_drake.systems.residual_policy import ResidualPolicy, ResidualPolicyConfig
 from rlfd_drake.systems.setpoint_triad import SetpointTriad
 from rlfd_drake.systems.velocity_command import VelocityCommandConfig, VelocityCommandSetpoint
-from rlfd_drake.tasks import TaskSpec
+from rlfd_drake.tasks import TaskSpec, table_slope_residual
 from rlfd_drake.view import (
     BASE_SETPOINT_PATH,
     SETPOINT_PATH,
@@ -360,6 +360,11 @@ def BuildRlfdDiagram(
                     rate_per_s=task.residual_rate_per_s,
                     period_s=config.impedance.period_s,
                     activation_time_s=activation,
+                    start_offset=tuple(
+                        table_slope_residual(task)
+                        if task.residual_starts_at_table_slope
+                        else np.zeros(RESIDUAL_SIZE)
+                    ),
                 )
             ),
         )

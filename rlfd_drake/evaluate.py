@@ -201,6 +201,10 @@ def make_policy(
                 "of a translation|orientation policy"
             )
         return kit.policy
+    if policy_spec in ("force_search", "slope", "fixture_oracle"):
+        from rlfd_drake.base_correction import check_offset_rule
+
+        check_offset_rule(policy_spec, task)
     if policy_spec == "force_search":
         from rlfd_drake.baselines.force_guided import ForceGuidedSearch
 

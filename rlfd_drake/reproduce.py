@@ -335,6 +335,10 @@ RUNS["rlfd_ppo_incremental_lrlin"] = {_INCREMENTAL["peg"]: _linear_lr_run(_INCRE
 RUNS["rlfd_ppo_incremental_lrlin_1400"] = {
     _INCREMENTAL["peg"]: _linear_lr_run(_INCREMENTAL["peg"], 1400)
 }
+# The same on peg_incremental's variant whose held offset starts at the turn that undoes
+# the table's slope (the cell's known tilt; a deviation): section 24.
+_PEG_SLOPE_START = "models/tasks/variants/peg_incremental_slope_start.yaml"
+RUNS["rlfd_ppo_incremental_lrlin"][_PEG_SLOPE_START] = _linear_lr_run(_PEG_SLOPE_START, 700)
 # Peg's falling-step recipe trained on a wider fixture error (+-2.5 mm, a training-only
 # variant) and evaluated on peg_incremental, section 19: less consistent over seeds.
 _PEG_WIDE_ERROR = "models/tasks/variants/peg_incremental_wide_error.yaml"
@@ -974,6 +978,27 @@ _add_variant_tables(
     "(results/full_pose_study.md). The paper's columns are its physical robot, as in "
     "Table IV.",
     dmp_label="None / None (DMP alone)",
+)
+
+_add_variant_tables(
+    "peg_slope_start",
+    "Peg with the rate residual starting at the table slope's turn",
+    {"peg": _PEG_SLOPE_START},
+    [
+        (
+            "PPO / PPO (rLfD), incremental from the slope's turn, step size falling to 0, "
+            "700 episodes",
+            "rlfd_ppo_incremental_lrlin",
+        )
+    ],
+    "peg_incremental whose held offset starts at the constant turn that undoes the "
+    "table's 1 deg slope, not at zero (residual_starts_at_table_slope; the cell's known "
+    "tilt, a deviation from the paper's residual, which starts at nothing; "
+    "models/tasks/variants/peg_incremental_slope_start.yaml): the DMP row is the DMP with "
+    "that turn, the PPO row the incremental table's falling-step recipe, unchanged, on it "
+    "(results/full_pose_study.md, section 24). The paper's column is its physical robot, as "
+    "in Table IV.",
+    dmp_label="None / None (DMP alone, with the slope's constant turn)",
 )
 
 _add_variant_tables(

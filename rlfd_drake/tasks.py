@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from rlfd_drake.geometry import quat_from_angle_axis, quat_multiply
+from rlfd_drake.geometry import quat_from_angle_axis, quat_multiply, rotation_vector_from_quat
 from rlfd_drake.paths import models_dir
 
 PART_KINDS = ("square_peg", "gear", "rj45_plug")
@@ -262,6 +262,13 @@ class TaskSpec:
             back (Ijspeert et al. 2013; a deviation from the paper;
             models/tasks/variants/rj45_phase_stop.yaml).
         dmp_phase_stop_deadband_m: tracking error below which the DMP is not slowed, m.
+        residual_starts_at_table_slope: with a rate residual: the held offset starts at
+            the constant turn that undoes the table's slope (``table_slope_residual``)
+            instead of zero, so the learner searches from a set-point that is level
+            with the fixture's known tilt (the cell's measured slope, the part of the
+            fixture error that is the same in every episode; a deviation from the
+            paper, whose residual starts at zero; models/tasks/variants/
+            peg_incremental_slope_start.yaml).
     """
 
     name: str
@@ -288,6 +295,7 @@ class TaskSpec:
     residual_rate_per_s: float | None = None
     dmp_phase_stop_gain_per_m2: float = 0.0
     dmp_phase_stop_deadband_m: float = 0.0
+    residual_starts_at_table_slope: bool = False
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -351,6 +359,10 @@ def _convert(value: object, hint: object, where: str) -> object:
         if not math.isfinite(float(value)):
             raise ValueError(f"{where}: expected a finite number, got {value!r}")
         return float(value)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"{where}: expected true or false, got {value!r}")
+        return value
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ValueError(f"{where}: expected an integer, got {value!r}")
@@ -480,6 +492,18 @@ def _validate(task: TaskSpec) -> None:
     _positive(task.residual_period_s, "residual_period_s")
     _positive(task.dmp_phase_stop_gain_per_m2, "dmp_phase_stop_gain_per_m2", allow_zero=True)
     _positive(task.dmp_phase_stop_deadband_m, "dmp_phase_stop_deadband_m", allow_zero=True)
+    if task.residual_starts_at_table_slope:
+        if task.residual_rate_per_s is None:
+            raise ValueError(
+                "residual_starts_at_table_slope needs a rate residual (residual_rate_per_s), "
+                "got residual_rate_per_s = None (an offset residual: use --base-correction slope)"
+            )
+        units = np.abs(table_slope_residual(task)[3:6])
+        if np.any(units > 1.0):
+            raise ValueError(
+                f"residual_starts_at_table_slope: the slope's turn is {units.max():.2f} of "
+                f"residual_max_rotation_rad = {task.residual_max_rotation_rad}, beyond the range"
+            )
     if task.residual_period_s > task.episode_time_s - task.residual_activation_s:
         raise ValueError(
             f"residual_period_s = {task.residual_period_s} is longer than the time the "
@@ -717,3 +741,14 @@ def table_slope_quaternion(task: TaskSpec) -> np.ndarray:
     the same in every episode (``sample_fixture_error``)."""
     err = task.fixture_error
     return quat_from_angle_axis(math.radians(err.table_slope_deg), np.asarray(err.table_slope_axis))
+
+
+def table_slope_residual(task: TaskSpec) -> np.ndarray:
+    """The residual (6,), in units of the task's ranges, that undoes the table slope:
+    no translation; the rotation ``R_WF R_slope R_WF^T`` as a world rotation vector over
+    ``residual_max_rotation_rad`` (the residual turns the part in the world, R_cmd =
+    R_delta R_dmp, and the slope is expressed in F). Not clipped."""
+    rotation = task.X_WFixture.rotation_matrix() @ rotation_vector_from_quat(
+        table_slope_quaternion(task)
+    )
+    return np.r_[np.zeros(3), rotation / task.residual_max_rotation_rad]

@@ -90,6 +90,35 @@ def test_the_search_with_the_slope_turns_by_the_tables_constant_tilt():
         BaseCorrectedAction(_RecordingEnv(), "force_search_and_slope")
 
 
+def test_the_slope_rule_only_turns_by_the_tables_constant_tilt():
+    """slope: no translation, the same turn on every observation, 1 deg of peg's 5."""
+    from rlfd_drake.tasks import load_task
+
+    rule = make_base_correction("slope", load_task("peg"))
+    pressed, free = rule(_pressed_observation()), rule(np.zeros(OBSERVATION_SIZE))
+    np.testing.assert_allclose(pressed, free)
+    np.testing.assert_allclose(pressed[0:3], 0.0)
+    assert np.degrees(np.linalg.norm(pressed[3:6]) * 0.087) == pytest.approx(1.0, rel=0.01)
+    with pytest.raises(ValueError, match="slope needs the task"):
+        make_base_correction("slope")
+
+
+@pytest.mark.parametrize("rule", ["force_search", "force_search_and_slope", "slope"])
+def test_an_offset_rule_is_refused_on_a_rate_residual(rule):
+    """On peg_incremental the action is integrated: a constant turn would drift to the
+    range's end. Each entry point names the rule, the task and the rate."""
+    from rlfd_drake.evaluate import make_policy
+    from rlfd_drake.tasks import load_task
+
+    task = load_task("models/tasks/variants/peg_incremental.yaml")
+    pattern = f"rule '{rule}' gives a residual offset.*peg_incremental.*residual_rate_per_s=2.0"
+    with pytest.raises(ValueError, match=pattern):
+        make_base_correction(rule, task)
+    if rule != "force_search_and_slope":
+        with pytest.raises(ValueError, match=pattern):
+            make_policy(f"dmp|{rule}", "full", 0, task=task)
+
+
 def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():
     env = _RecordingEnv()
     wrapped = BaseCorrectedAction(env, "force_search")

@@ -25,6 +25,7 @@ from rlfd_drake.diagram import (
 )
 from rlfd_drake.dmp import fit_cartesian_dmp
 from rlfd_drake.episode import demo_start_pose
+from rlfd_drake.geometry import quat_conjugate, quat_multiply
 from rlfd_drake.panda import PANDA_TORQUE_LIMITS_NM
 from rlfd_drake.tasks import load_task
 
@@ -292,6 +293,32 @@ def test_a_task_with_a_residual_rate_integrates_the_action(peg):
     assert observed == pytest.approx(offset / max_translation_m, rel=1e-9)
     with pytest.raises(ValueError, match="residual_rate_per_s = 2.0"):
         BuildRlfdDiagram(incremental, model, RlfdDiagramConfig(composition="pure"))
+
+
+def test_a_rate_residual_can_start_at_the_table_slope(peg):
+    """``residual_starts_at_table_slope``: with no action the composer turns the
+    set-point by the slope's undoing from activation on, and the observer reports it."""
+    from rlfd_drake.geometry import rotation_vector_from_quat
+    from rlfd_drake.tasks import table_slope_residual
+
+    task, model, X_WP_start = peg
+    tilted = dataclasses.replace(task, residual_rate_per_s=2.0, residual_starts_at_table_slope=True)
+    rlfd = BuildRlfdDiagram(tilted, model, RlfdDiagramConfig(residual_activation_s=0.0))
+    simulator = Simulator(rlfd.diagram)
+    context = simulator.get_mutable_context()
+    rlfd.diagram.GetInputPort("residual").FixValue(context, np.zeros(6))
+    SetEpisodeStart(rlfd, context, X_WP_start)
+    simulator.AdvanceTo(0.05)
+    q_desired = rlfd.diagram.GetOutputPort("X_WE_desired").Eval(context)[3:7]
+    q_base = rlfd.diagram.GetOutputPort("X_WE_base").Eval(context)[3:7]
+    q_delta = quat_multiply(q_desired, quat_conjugate(q_base))
+    _, max_rotation_rad = RlfdDiagramConfig().residual_bounds(task)
+    expected = table_slope_residual(tilted)
+    np.testing.assert_allclose(
+        rotation_vector_from_quat(q_delta), expected[3:6] * max_rotation_rad, atol=1e-9
+    )
+    observed = rlfd.diagram.GetOutputPort("observation").Eval(context)[20:26]
+    np.testing.assert_allclose(observed, expected, atol=1e-9)
 
 
 def test_a_task_with_a_push_bound_gives_it_to_the_composer(peg):

@@ -610,6 +610,11 @@ def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_g
     "run_key, path, episodes",
     [
         ("rlfd_ppo_incremental_lrlin", "models/tasks/variants/peg_incremental.yaml", 700),
+        (
+            "rlfd_ppo_incremental_lrlin",
+            "models/tasks/variants/peg_incremental_slope_start.yaml",
+            700,
+        ),
         ("rlfd_ppo_incremental_lrlin_1400", "models/tasks/variants/peg_incremental.yaml", 1400),
         (
             "rlfd_ppo_incremental_nopush_lrlin_1400",

@@ -53,3 +53,28 @@ def test_bad_config_names_the_field(field, value):
         ResidualIntegrator(ResidualIntegratorConfig(**{field: value}))
     with pytest.raises(ValueError, match="activation_time_s must be a non-negative"):
         ResidualIntegrator(ResidualIntegratorConfig(activation_time_s=-1.0))
+
+
+def test_the_offset_starts_where_it_is_told_and_integrates_from_there(sample_output):
+    """``start_offset``: held before activation, the rate added to it after."""
+    activation = 0.1
+    start = np.array([0.0, 0.0, 0.0, 0.0, 0.2, 0.0])
+    config = ResidualIntegratorConfig(
+        rate_per_s=1.0, period_s=0.002, activation_time_s=activation, start_offset=tuple(start)
+    )
+    rate = np.array([0.5, 0.0, 0.0, 0.0, -1.0, 0.0])
+    samples = sample_output(ResidualIntegrator(config), rate, activation + 0.1)
+    for t, y in samples:
+        if t < activation - 1e-9:
+            np.testing.assert_array_equal(y, start)
+    t_end, y_end = samples[-1]
+    elapsed = round((t_end - activation) / config.period_s) * config.period_s
+    np.testing.assert_allclose(y_end, start + np.clip(rate, -1, 1) * elapsed, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "start", [(0.0,) * 5, (0.0, 0.0, 0.0, 0.0, 1.5, 0.0), (0.0, 0.0, 0.0, 0.0, float("nan"), 0.0)]
+)
+def test_a_bad_start_offset_is_refused(start):
+    with pytest.raises(ValueError, match="start_offset must be 6 numbers in \\[-1, 1\\]"):
+        ResidualIntegrator(ResidualIntegratorConfig(start_offset=start))

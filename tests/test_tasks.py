@@ -423,3 +423,32 @@ def test_every_variant_file_holds_only_its_changes():
                 if inner is not None:
                     mine, theirs = getattr(mine, inner), getattr(theirs, inner)
                 assert mine != theirs, f"{path}: {key} {inner or ''} repeats the base's value"
+
+
+def test_a_residual_that_starts_at_the_table_slope_needs_a_rate_and_the_range(tmp_path):
+    """residual_starts_at_table_slope: the variant's integrator starts at the turn that
+    undoes the slope (1 deg of peg's 5 deg about y); refused on an offset residual, with a
+    range too small for the turn, or given as anything but true/false."""
+    from rlfd_drake.tasks import table_slope_residual
+
+    variant = load_task("models/tasks/variants/peg_incremental_slope_start.yaml")
+    incremental = load_task("models/tasks/variants/peg_incremental.yaml")
+    assert variant.residual_starts_at_table_slope
+    assert (
+        dataclasses.replace(variant, name=incremental.name, residual_starts_at_table_slope=False)
+        == incremental
+    )
+    np.testing.assert_allclose(
+        table_slope_residual(variant), [0, 0, 0, 0, np.radians(1.0) / 0.087, 0], atol=1e-12
+    )
+    base = tasks_dir() / "variants" / "peg_incremental.yaml"
+    for changes, pattern in (
+        ({"based_on": "peg"}, "needs a rate residual .*residual_rate_per_s = None"),
+        ({"residual_max_rotation_rad": 0.01}, "the slope's turn is 1.75 of"),
+        ({"residual_starts_at_table_slope": "yes"}, "expected true or false, got 'yes'"),
+    ):
+        data = {"based_on": str(base), "name": "v", "residual_starts_at_table_slope": True}
+        path = tmp_path / "v.yaml"
+        path.write_text(yaml.safe_dump({**data, **changes}))
+        with pytest.raises(ValueError, match=pattern):
+            load_task(path)

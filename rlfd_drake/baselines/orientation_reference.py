@@ -23,7 +23,7 @@ import numpy as np
 
 from rlfd_drake.diagram import RESIDUAL_SIZE
 from rlfd_drake.geometry import rotation_vector_from_quat
-from rlfd_drake.tasks import TaskSpec, table_slope_quaternion
+from rlfd_drake.tasks import TaskSpec, table_slope_residual
 
 __all__ = ["ConstantRotationResidual", "fixture_rotation_residual", "slope_residual"]
 
@@ -57,7 +57,7 @@ def _world_rotation_vector(task: TaskSpec, dq_in_fixture: np.ndarray) -> np.ndar
 
 def slope_residual(task: TaskSpec) -> ConstantRotationResidual:
     """The constant residual that undoes ``task``'s table slope."""
-    rotation = _world_rotation_vector(task, table_slope_quaternion(task))
+    rotation = table_slope_residual(task)[3:6] * task.residual_max_rotation_rad
     return ConstantRotationResidual(rotation, task.residual_max_rotation_rad)
 
 
