@@ -743,12 +743,15 @@ def table_slope_quaternion(task: TaskSpec) -> np.ndarray:
     return quat_from_angle_axis(math.radians(err.table_slope_deg), np.asarray(err.table_slope_axis))
 
 
+def fixture_turn_in_world(task: TaskSpec, dq_in_fixture) -> np.ndarray:
+    """A fixture rotation ``dq`` (wxyz, in F) as the world rotation vector (3,) that
+    turns the part with it, ``R_WF R_dq R_WF^T``: the residual turns the part in the
+    world (R_cmd = R_delta R_dmp), the fixture error is expressed in F."""
+    return task.X_WFixture.rotation_matrix() @ rotation_vector_from_quat(np.asarray(dq_in_fixture))
+
+
 def table_slope_residual(task: TaskSpec) -> np.ndarray:
-    """The residual (6,), in units of the task's ranges, that undoes the table slope:
-    no translation; the rotation ``R_WF R_slope R_WF^T`` as a world rotation vector over
-    ``residual_max_rotation_rad`` (the residual turns the part in the world, R_cmd =
-    R_delta R_dmp, and the slope is expressed in F). Not clipped."""
-    rotation = task.X_WFixture.rotation_matrix() @ rotation_vector_from_quat(
-        table_slope_quaternion(task)
-    )
+    """The residual (6,), in units of the task's ranges, that undoes the table slope: no
+    translation, the slope's world turn over ``residual_max_rotation_rad``. Not clipped."""
+    rotation = fixture_turn_in_world(task, table_slope_quaternion(task))
     return np.r_[np.zeros(3), rotation / task.residual_max_rotation_rad]

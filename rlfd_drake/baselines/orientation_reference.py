@@ -22,8 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from rlfd_drake.diagram import RESIDUAL_SIZE
-from rlfd_drake.geometry import rotation_vector_from_quat
-from rlfd_drake.tasks import TaskSpec, table_slope_residual
+from rlfd_drake.tasks import TaskSpec, fixture_turn_in_world, table_slope_quaternion
 
 __all__ = ["ConstantRotationResidual", "fixture_rotation_residual", "slope_residual"]
 
@@ -51,14 +50,11 @@ class ConstantRotationResidual:
         return self._action.copy()
 
 
-def _world_rotation_vector(task: TaskSpec, dq_in_fixture: np.ndarray) -> np.ndarray:
-    return task.X_WFixture.rotation_matrix() @ rotation_vector_from_quat(np.asarray(dq_in_fixture))
-
-
 def slope_residual(task: TaskSpec) -> ConstantRotationResidual:
     """The constant residual that undoes ``task``'s table slope."""
-    rotation = table_slope_residual(task)[3:6] * task.residual_max_rotation_rad
-    return ConstantRotationResidual(rotation, task.residual_max_rotation_rad)
+    return ConstantRotationResidual(
+        fixture_turn_in_world(task, table_slope_quaternion(task)), task.residual_max_rotation_rad
+    )
 
 
 def fixture_rotation_residual(task: TaskSpec, fixture_dq) -> ConstantRotationResidual:
@@ -67,6 +63,4 @@ def fixture_rotation_residual(task: TaskSpec, fixture_dq) -> ConstantRotationRes
     dq = np.asarray(fixture_dq, dtype=float).reshape(-1)
     if dq.shape != (4,) or abs(np.linalg.norm(dq) - 1.0) > 1e-6:
         raise ValueError(f"fixture_dq must be a unit quaternion (wxyz), got {fixture_dq!r}")
-    return ConstantRotationResidual(
-        _world_rotation_vector(task, dq), task.residual_max_rotation_rad
-    )
+    return ConstantRotationResidual(fixture_turn_in_world(task, dq), task.residual_max_rotation_rad)
