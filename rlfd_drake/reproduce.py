@@ -486,6 +486,17 @@ RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
     )
     for task in ("rj45", _RJ45_FAST_RESIDUAL, _RJ45_PHASE_STOP)
 }
+# The same recipe on peg (section 8's peg flags, 700 episodes): results/full_pose_study.md,
+# section 24.
+RUNS["ppo_imitate_fs_slope_lrlin"] = {
+    "peg": _run(
+        "runs/peg_ppo_std2_so_imitate_fsslope_tt_lrlin_e700_s0",
+        "peg",
+        700,
+        f"{_LINEAR_LR_FLAGS} --imitate force_search_and_slope --imitation-episodes 200",
+        "ppo",
+    )
+}
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -919,13 +930,17 @@ def _add_variant_tables(
             for row in _mean_and_sampled(label, f"run:{run_key}", _PAPER_FULL_POSE_RLFD)
         ),
     ]
-    TABLES[name] = Table(title, columns, rows, note)
-    TABLES[f"forces_{name}"] = Table(
-        f"Contact forces of the {name} table's rows: peak total contact force (N), mean "
+    _add_table_and_forces(name, Table(title, columns, rows, note))
+
+
+def _add_table_and_forces(name: str, table: Table) -> None:
+    """TABLES[name] = ``table`` and TABLES["forces_" + name]: the same rows' peak forces."""
+    TABLES[name] = table
+    TABLES[f"forces_{name}"] = replace(
+        table,
+        title=f"Contact forces of the {name} table's rows: peak total contact force (N), mean "
         "over episodes",
-        columns,
-        [replace(row, paper={}) for row in rows],
-        note,
+        rows=[replace(row, paper={}) for row in table.rows],
         metric="peak_force",
     )
 
@@ -1102,10 +1117,12 @@ TABLES["6_incremental_nopush"] = Table(
 )
 
 
-def _slope_teacher_rows(trained_label: str, paper: dict[str, float]) -> list[Row]:
+def _slope_teacher_rows(
+    trained_label: str, paper: dict[str, float], run_key: str = "ppo_imitate_fs_slope_lrlin_1400"
+) -> list[Row]:
     """The slope teacher's rows: the rule, PPO's copy of it before RL, and after RL
-    (labelled ``trained_label``, beside the paper's ``paper``)."""
-    run = "run:ppo_imitate_fs_slope_lrlin_1400"
+    (RUNS[run_key], labelled ``trained_label``, beside the paper's ``paper``)."""
+    run = f"run:{run_key}"
     return [
         Row("Force-guided search + the slope's constant turn", "force_search|slope", {}),
         Row(
@@ -1210,6 +1227,40 @@ TABLES["rj45_phase_stop"] = _rj45_variant_table(
     "2013; a deviation from the paper, whose DMP runs open loop), so it waits while the "
     "socket holds the plug back.",
     shipped=" with the paper's open-loop DMP",
+)
+
+_PEG_IMITATION_ROWS = [
+    Row("DMP alone", "dmp", {"peg": 52.6}),
+    Row("DMP + the slope's constant turn (knows the cell's tilt)", "dmp|slope", {}),
+    *_slope_teacher_rows(
+        "PPO from that copy, 700 episodes, step size falling to zero",
+        {"peg": _PAPER_FULL_POSE_RLFD["peg"]},
+        run_key="ppo_imitate_fs_slope_lrlin",
+    ),
+]
+_PEG_IMITATION_NOTE = (
+    "The shipped peg (offset residual). Before RL, PPO's mean is fitted to the actions of "
+    "the force-guided search with the constant turn that undoes the table's 1 deg slope "
+    "(hand-written, not in the paper) on 200 training episodes and its value to their "
+    "discounted returns (rlfd train --imitate force_search_and_slope --imitation-episodes "
+    "200); then section 8's peg recipe (log std -2, scaled observation, time limit "
+    "terminal) for 700 episodes with the step size falling linearly to zero. At run time "
+    "the network acts alone. 200 test starts (evaluation seed 0), whatever the budget; "
+    "training seed 0 (other seeds: results/seeds_peg_ppo_std2_so_imitate_fsslope_*.md). "
+    "The paper's figures are its physical robot (Table IV: DMP 52.6 %, PPO / PPO 97.9 %); "
+    "its rLfD starts from the zero residual, not from a teacher "
+    "(results/full_pose_study.md, section 24)."
+)
+_add_table_and_forces(
+    "peg_imitation",
+    Table(
+        "Peg with PPO started from a copy of the force-guided search + the slope's turn "
+        "(mean action)",
+        {"peg": "peg"},
+        _PEG_IMITATION_ROWS,
+        _PEG_IMITATION_NOTE,
+        evaluation_episodes=200,
+    ),
 )
 
 #: The residual bounds (m, rad) of the evaluations stored before tasks had their own.

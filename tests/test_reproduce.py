@@ -645,26 +645,32 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
     assert (args.log_std_init, args.scaled_observation, args.timeout_terminal) == (-2.0, True, True)
 
 
-def test_the_slope_teacher_row_trains_what_the_study_ran():
-    """rj45_study.md's last section: the falling-step imitation recipe whose teacher is
-    the search with the slope's turn; the row's command parses to the study's."""
+@pytest.mark.parametrize(
+    ("run_key", "task", "table_name"),
+    [
+        ("ppo_imitate_fs_slope_lrlin_1400", "rj45", "rj45_imitation"),
+        ("ppo_imitate_fs_slope_lrlin", "peg", "peg_imitation"),
+    ],
+)
+def test_the_slope_teacher_rows_train_what_the_studies_ran(run_key, task, table_name):
+    """rj45_study.md's last section and full_pose_study.md section 24: the falling-step
+    imitation recipe whose teacher is the search with the slope's turn; the row's command
+    parses to the one its stored training log (results/train_<folder>/) records."""
     from rlfd_drake.cli import build_parser
 
-    folder, command = reproduce.RUNS["ppo_imitate_fs_slope_lrlin_1400"]["rj45"]
-    studied = (
-        "train --task rj45 --algo ppo --episodes 1400 --seed 0 --envs 2 --log-std-init -2.0 "
-        "--scaled-observation --timeout-terminal --contact-torque-nm 0.05 "
-        "--force-limit-penalty 1 --imitate force_search_and_slope --imitation-episodes 200 "
-        f"--learning-rate-schedule linear --no-progress --out {folder}"
-    )
+    folder, command = reproduce.RUNS[run_key][task]
+    stored = Path(reproduce.__file__).parents[1] / "results" / f"train_{Path(folder).name}"
+    ran = json.loads((stored / "config.json").read_text())["command"]
     parser = build_parser()
     row = vars(parser.parse_args(command.split()[1:]))
-    ran = vars(parser.parse_args(studied.split()))
+    studied = vars(parser.parse_args(ran.split()[1:]))
     assert {k: v for k, v in row.items() if k != "no_progress"} == {
-        k: v for k, v in ran.items() if k != "no_progress"
+        k: v for k, v in studied.items() if k != "no_progress"
     }
-    labels = [row.label for row in reproduce.TABLES["rj45_imitation"].rows]
-    assert "Force-guided search + the slope's constant turn" in labels
+    assert row["imitate"] == "force_search_and_slope" and row["task"] == task
+    rows = reproduce.TABLES[table_name].rows
+    assert "Force-guided search + the slope's constant turn" in [r.label for r in rows]
+    assert [r.checkpoint for r in rows if r.source == f"run:{run_key}"] == ["policy_0_steps", None]
 
 
 @pytest.mark.parametrize(
