@@ -1249,7 +1249,7 @@ _PEG_IMITATION_NOTE = (
     "training seed 0 (other seeds: results/seeds_peg_ppo_std2_so_imitate_fsslope_*.md). "
     "The paper's figures are its physical robot (Table IV: DMP 52.6 %, PPO / PPO 97.9 %); "
     "its rLfD starts from the zero residual, not from a teacher "
-    "(results/full_pose_study.md, section 24)."
+    "(results/full_pose_study.md, sections 24-25)."
 )
 _add_table_and_forces(
     "peg_imitation",
