@@ -19,15 +19,17 @@ from rlfd_drake.results import check_result_name, results_dir, write_compressed
 __all__ = ["keep_run_log", "read_episode_log", "run_log_file", "run_log_folders"]
 
 #: Files of a run folder that are copied as they are; config.json is required.
-_COPIED = ("config.json", "metrics.json")
+#: imitation.json (runs started from a copied teacher) holds the teacher's success and
+#: how closely PPO's copy fits it, which the studies quote.
+_COPIED = ("config.json", "metrics.json", "imitation.json")
 _EPISODES = "episodes.csv"
 
 
 def keep_run_log(run_dir: str | Path, name: str | None = None, overwrite: bool = False) -> Path:
     """Copies ``run_dir``'s config.json, metrics.json (absent while a run is stopped
-    before its end) and episodes.csv (as episodes.csv.gz) to
-    ``results/train_<name>/`` (``name`` defaults to the folder's name); returns that
-    folder. An existing kept log is replaced only with ``overwrite``."""
+    before its end), imitation.json (only runs that copied a teacher) and episodes.csv
+    (as episodes.csv.gz) to ``results/train_<name>/`` (``name`` defaults to the folder's
+    name); returns that folder. An existing kept log is replaced only with ``overwrite``."""
     run_dir = Path(run_dir)
     for required in ("config.json", _EPISODES):
         if not (run_dir / required).is_file():

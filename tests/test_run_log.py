@@ -40,6 +40,14 @@ def test_keep_copies_the_log_with_the_episodes_compressed(run_dir, tmp_path):
     assert (kept / "episodes.csv.gz").read_bytes() == first
 
 
+def test_keep_copies_a_runs_imitation_record(run_dir):
+    """A run started from a copied teacher keeps its imitation.json (teacher success, fit)."""
+    imitation = {"teacher": "force_search_and_slope", "teacher_success_rate": 0.99}
+    (run_dir / "imitation.json").write_text(json.dumps(imitation))
+    kept = keep_run_log(run_dir)
+    assert json.loads((kept / "imitation.json").read_text()) == imitation
+
+
 def test_keep_refuses_to_overwrite_and_names_bad_input(run_dir, tmp_path, capsys):
     assert main(["keep", str(run_dir)]) == 0
     assert main(["keep", str(run_dir)]) == 2  # already kept: nothing replaced
