@@ -1229,36 +1229,34 @@ TABLES["rj45_phase_stop"] = _rj45_variant_table(
     shipped=" with the paper's open-loop DMP",
 )
 
-_PEG_IMITATION_ROWS = [
-    Row("DMP alone", "dmp", {"peg": 52.6}),
-    Row("DMP + the slope's constant turn (knows the cell's tilt)", "dmp|slope", {}),
-    *_slope_teacher_rows(
-        "PPO from that copy, 700 episodes, step size falling to zero",
-        {"peg": _PAPER_FULL_POSE_RLFD["peg"]},
-        run_key="ppo_imitate_fs_slope_lrlin",
-    ),
-]
-_PEG_IMITATION_NOTE = (
-    "The shipped peg (offset residual). Before RL, PPO's mean is fitted to the actions of "
-    "the force-guided search with the constant turn that undoes the table's 1 deg slope "
-    "(hand-written, not in the paper) on 200 training episodes and its value to their "
-    "discounted returns (rlfd train --imitate force_search_and_slope --imitation-episodes "
-    "200); then section 8's peg recipe (log std -2, scaled observation, time limit "
-    "terminal) for 700 episodes with the step size falling linearly to zero. At run time "
-    "the network acts alone. 200 test starts (evaluation seed 0), whatever the budget; "
-    "training seed 0 (other seeds: results/seeds_peg_ppo_std2_so_imitate_fsslope_*.md). "
-    "The paper's figures are its physical robot (Table IV: DMP 52.6 %, PPO / PPO 97.9 %); "
-    "its rLfD starts from the zero residual, not from a teacher "
-    "(results/full_pose_study.md, sections 24-25)."
-)
 _add_table_and_forces(
     "peg_imitation",
     Table(
         "Peg with PPO started from a copy of the force-guided search + the slope's turn "
         "(mean action)",
         {"peg": "peg"},
-        _PEG_IMITATION_ROWS,
-        _PEG_IMITATION_NOTE,
+        [
+            Row("DMP alone", "dmp", {"peg": 52.6}),
+            Row("DMP + the slope's constant turn (knows the cell's tilt)", "dmp|slope", {}),
+            *_slope_teacher_rows(
+                "PPO from that copy, 700 episodes, step size falling to zero",
+                {"peg": _PAPER_FULL_POSE_RLFD["peg"]},
+                run_key="ppo_imitate_fs_slope_lrlin",
+            ),
+        ],
+        (
+            "The shipped peg (offset residual). Before RL, PPO's mean is fitted to the actions of "
+            "the force-guided search with the constant turn that undoes the table's 1 deg slope "
+            "(hand-written, not in the paper) on 200 training episodes and its value to their "
+            "discounted returns (rlfd train --imitate force_search_and_slope --imitation-episodes "
+            "200); then section 8's peg recipe (log std -2, scaled observation, time limit "
+            "terminal) for 700 episodes with the step size falling linearly to zero. At run time "
+            "the network acts alone. 200 test starts (evaluation seed 0), whatever the budget; "
+            "training seed 0 (other seeds: results/seeds_peg_ppo_std2_so_imitate_fsslope_*.md). "
+            "The paper's figures are its physical robot (Table IV: DMP 52.6 %, PPO / PPO 97.9 %); "
+            "its rLfD starts from the zero residual, not from a teacher "
+            "(results/full_pose_study.md, sections 24-25)."
+        ),
         evaluation_episodes=200,
     ),
 )

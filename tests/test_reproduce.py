@@ -652,15 +652,16 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
         ("ppo_imitate_fs_slope_lrlin", "peg", "peg_imitation"),
     ],
 )
-def test_the_slope_teacher_rows_train_what_the_studies_ran(run_key, task, table_name):
+def test_the_slope_teacher_rows_train_what_the_studies_ran(run_key, task, table_name, monkeypatch):
     """rj45_study.md's last section and full_pose_study.md section 24: the falling-step
     imitation recipe whose teacher is the search with the slope's turn; the row's command
     parses to the one its stored training log (results/train_<folder>/) records."""
     from rlfd_drake.cli import build_parser
+    from rlfd_drake.run_log import run_log_file
 
+    monkeypatch.chdir(Path(reproduce.__file__).parents[1])  # the checkout's results/
     folder, command = reproduce.RUNS[run_key][task]
-    stored = Path(reproduce.__file__).parents[1] / "results" / f"train_{Path(folder).name}"
-    ran = json.loads((stored / "config.json").read_text())["command"]
+    ran = json.loads(run_log_file(folder, "config.json").read_text())["command"]
     parser = build_parser()
     row = vars(parser.parse_args(command.split()[1:]))
     studied = vars(parser.parse_args(ran.split()[1:]))
