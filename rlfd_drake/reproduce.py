@@ -497,6 +497,18 @@ RUNS["ppo_imitate_fs_slope_lrlin"] = {
         "ppo",
     )
 }
+# The same peg recipe with a cost of 0.5 per newton of the one-step peak contact force
+# above 116 N (the DMP's mean peak on these starts): full_pose_study.md, sections 25-26.
+RUNS["ppo_imitate_fs_slope_lrlin_peak_cost"] = {
+    "peg": _run(
+        "runs/peg_ppo_std2_so_imitate_fsslope_tt_lrlin_pfc05_1step116_e700_s0",
+        "peg",
+        700,
+        f"{_LINEAR_LR_FLAGS} --imitate force_search_and_slope --imitation-episodes 200 "
+        "--peak-force-cost 0.5 --peak-force-threshold-n 116 --peak-force-signal one_step",
+        "ppo",
+    )
+}
 # The soft-wrist variants (20 N m/rad, results/wrist_stiffness_study.md): Table IV's
 # 4-update full-pose SAC recipe, unchanged, on each variant.
 _SOFT_WRIST = {task: f"models/tasks/variants/{task}_soft_wrist.yaml" for task in _PHYSICAL}
@@ -1243,6 +1255,11 @@ _add_table_and_forces(
                 {"peg": _PAPER_FULL_POSE_RLFD["peg"]},
                 run_key="ppo_imitate_fs_slope_lrlin",
             ),
+            Row(
+                "The same, with a cost on the one-step peak force above 116 N",
+                "run:ppo_imitate_fs_slope_lrlin_peak_cost",
+                {"peg": _PAPER_FULL_POSE_RLFD["peg"]},
+            ),
         ],
         (
             "The shipped peg (offset residual). Before RL, PPO's mean is fitted to the actions of "
@@ -1250,12 +1267,15 @@ _add_table_and_forces(
             "(hand-written, not in the paper) on 200 training episodes and its value to their "
             "discounted returns (rlfd train --imitate force_search_and_slope --imitation-episodes "
             "200); then section 8's peg recipe (log std -2, scaled observation, time limit "
-            "terminal) for 700 episodes with the step size falling linearly to zero. At run time "
+            "terminal) for 700 episodes with the step size falling linearly to zero; the last row "
+            "adds a cost of 0.5 per newton of the one-step peak contact force above the DMP's "
+            "116 N (--peak-force-cost 0.5 --peak-force-threshold-n 116 --peak-force-signal "
+            "one_step). At run time "
             "the network acts alone. 200 test starts (evaluation seed 0), whatever the budget; "
             "training seed 0 (other seeds: results/seeds_peg_ppo_std2_so_imitate_fsslope_*.md). "
             "The paper's figures are its physical robot (Table IV: DMP 52.6 %, PPO / PPO 97.9 %); "
             "its rLfD starts from the zero residual, not from a teacher "
-            "(results/full_pose_study.md, sections 24-25)."
+            "(results/full_pose_study.md, sections 24-26)."
         ),
         evaluation_episodes=200,
     ),

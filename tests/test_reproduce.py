@@ -646,16 +646,20 @@ def test_the_falling_step_size_rows_train_in_one_run_with_a_linear_schedule(
 
 
 @pytest.mark.parametrize(
-    ("run_key", "task", "table_name"),
+    ("run_key", "task", "table_name", "checkpoints"),
     [
-        ("ppo_imitate_fs_slope_lrlin_1400", "rj45", "rj45_imitation"),
-        ("ppo_imitate_fs_slope_lrlin", "peg", "peg_imitation"),
+        ("ppo_imitate_fs_slope_lrlin_1400", "rj45", "rj45_imitation", ["policy_0_steps", None]),
+        ("ppo_imitate_fs_slope_lrlin", "peg", "peg_imitation", ["policy_0_steps", None]),
+        ("ppo_imitate_fs_slope_lrlin_peak_cost", "peg", "peg_imitation", [None]),
     ],
 )
-def test_the_slope_teacher_rows_train_what_the_studies_ran(run_key, task, table_name, monkeypatch):
-    """rj45_study.md's last section and full_pose_study.md section 24: the falling-step
-    imitation recipe whose teacher is the search with the slope's turn; the row's command
-    parses to the one its stored training log (results/train_<folder>/) records."""
+def test_the_slope_teacher_rows_train_what_the_studies_ran(
+    run_key, task, table_name, checkpoints, monkeypatch
+):
+    """rj45_study.md's last section and full_pose_study.md sections 24-26: the falling-step
+    imitation recipe whose teacher is the search with the slope's turn (on peg also with a
+    cost on the peak force); the row's command parses to the one its stored training log
+    (results/train_<folder>/) records."""
     from rlfd_drake.cli import build_parser
     from rlfd_drake.run_log import run_log_file
 
@@ -671,7 +675,7 @@ def test_the_slope_teacher_rows_train_what_the_studies_ran(run_key, task, table_
     assert row["imitate"] == "force_search_and_slope" and row["task"] == task
     rows = reproduce.TABLES[table_name].rows
     assert "Force-guided search + the slope's constant turn" in [r.label for r in rows]
-    assert [r.checkpoint for r in rows if r.source == f"run:{run_key}"] == ["policy_0_steps", None]
+    assert [r.checkpoint for r in rows if r.source == f"run:{run_key}"] == checkpoints
 
 
 @pytest.mark.parametrize(
