@@ -1077,7 +1077,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     paired = sub.add_parser(
         "paired-forces",
-        help="stored evaluations' contact forces against a baseline's on the same starts",
+        help="stored evaluations' contact forces (and starts gained / lost) against a "
+        "baseline's on the same starts",
     )
     paired.add_argument(
         "--baseline",

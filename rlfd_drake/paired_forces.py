@@ -8,6 +8,10 @@ the baseline's? A two-sided sign test over the starts says whether the differenc
 more than the run-to-run scatter (the instantaneous peak of a contact-rich episode
 moves by about 1 % between equal runs; the 20 ms low-passed peak by less).
 
+The same pairing counts the starts each policy inserts that the baseline does not
+(gained) and the reverse (lost), with the same sign test: two success rates a point
+apart are noise on 200 starts unless the starts that differ mostly go one way.
+
 Like :mod:`rlfd_drake.breakdown` it runs nothing: it reads the episode tables that
 ``rlfd evaluate`` stored and copies their commands.
 """
@@ -54,6 +58,17 @@ def _paired(policy: np.ndarray, baseline: np.ndarray) -> dict:
         "n_below": below,
         "sign_test_p": sign_test_p(above, below),
     }
+
+
+def _outcomes(table: dict, base_table: dict) -> dict | None:
+    """Starts the policy inserts and the baseline does not (gained), the reverse (lost),
+    and the sign test over the two; None if either table has no success column."""
+    if "success" not in table or "success" not in base_table:
+        return None
+    policy = np.asarray(table["success"], dtype=bool)
+    baseline = np.asarray(base_table["success"], dtype=bool)
+    gained, lost = int(np.sum(policy & ~baseline)), int(np.sum(~policy & baseline))
+    return {"gained": gained, "lost": lost, "sign_test_p": sign_test_p(gained, lost)}
 
 
 def _column(table: dict, key: str, path: str | Path) -> np.ndarray:
@@ -105,9 +120,11 @@ def paired_forces(
     Returns:
         {"task", "episodes", "baseline": {"file", "command", "packages", "success_rate"},
         "columns": [{"label", "file", "command", "packages", "seed", "success_rate",
-        "peak", "low_passed"}]}, "peak" and "low_passed" as {"mean_n", "baseline_mean_n",
-        "mean_difference_n", "median_ratio", "n_above", "n_below", "sign_test_p"};
-        "packages" is the versions the evaluation recorded (None: not recorded).
+        "outcomes", "peak", "low_passed"}]}, "outcomes" as {"gained", "lost",
+        "sign_test_p"} (None where an episode table has no success column), "peak" and
+        "low_passed" as {"mean_n", "baseline_mean_n", "mean_difference_n", "median_ratio",
+        "n_above", "n_below", "sign_test_p"}; "packages" is the versions the evaluation
+        recorded (None: not recorded).
 
     Raises:
         ValueError: no evaluation, labels not one per file, a file that is not an
@@ -145,6 +162,7 @@ def paired_forces(
                 "packages": _recorded_packages(record),
                 "seed": record.get("seed"),
                 "success_rate": result.get("success_rate"),
+                "outcomes": _outcomes(table, base_table),
                 **{
                     signal: _paired(_column(table, key, path), _column(base_table, key, baseline))
                     for signal, key in FORCE_SIGNALS.items()
@@ -169,12 +187,14 @@ def paired_forces(
 
 
 def paired_forces_markdown(data: dict) -> str:
-    """One row per evaluation: success, then for the peak and the low-passed peak the
+    """One row per evaluation: success, the starts gained / lost against the baseline
+    with their sign test, then for the peak and the low-passed peak the
     means (policy / baseline), the median per-start ratio, the starts above / below the
     baseline and the sign test's p."""
     header = [
         "policy",
         "success",
+        "gained / lost (p)",
         "peak, N (policy / baseline)",
         "median ratio",
         "above / below",
@@ -190,7 +210,8 @@ def paired_forces_markdown(data: dict) -> str:
         "",
         f"{utc_now()[:10]}. Baseline: `{data['baseline']['file']}` "
         f"({100 * data['baseline']['success_rate']:.1f} %). Per start, the policy's peak "
-        "against the baseline's; p is the two-sided sign test (ties dropped). Regrouped "
+        "against the baseline's; gained / lost: starts the policy inserts and the baseline "
+        "does not, and the reverse; p is the two-sided sign test (ties dropped). Regrouped "
         "from the stored evaluations below; nothing was run.",
         "",
         package_note(data),
@@ -199,7 +220,14 @@ def paired_forces_markdown(data: dict) -> str:
         "|" + "---|" * len(header),
     ]
     for column in data["columns"]:
-        cells = [column["label"], f"{100 * column['success_rate']:.1f} %"]
+        outcomes = column.get("outcomes")
+        cells = [
+            column["label"],
+            f"{100 * column['success_rate']:.1f} %",
+            "-"
+            if outcomes is None
+            else f"{outcomes['gained']} / {outcomes['lost']} ({outcomes['sign_test_p']:.2g})",
+        ]
         for signal in FORCE_SIGNALS:
             s = column[signal]
             cells += [

@@ -8,11 +8,17 @@ import math
 import pytest
 
 from rlfd_drake.cli import main
-from rlfd_drake.paired_forces import paired_forces, sign_test_p
+from rlfd_drake.paired_forces import paired_forces, paired_forces_markdown, sign_test_p
 
 
-def _evaluation(task: str, peaks: list[float], offsets: list[float] | None = None) -> dict:
+def _evaluation(
+    task: str,
+    peaks: list[float],
+    offsets: list[float] | None = None,
+    success: list[bool] | None = None,
+) -> dict:
     n = len(peaks)
+    table = {} if success is None else {"success": success}
     return {
         "task": task,
         "episodes": n,
@@ -23,6 +29,7 @@ def _evaluation(task: str, peaks: list[float], offsets: list[float] | None = Non
             "fixture_error_mm": [0.5] * n,
             "peak_force_n": peaks,
             "peak_low_passed_force_n": [p / 2 for p in peaks],
+            **table,
         },
     }
 
@@ -45,10 +52,13 @@ def test_sign_test_matches_the_binomial_tails():
 
 def test_paired_forces_compares_start_by_start(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    baseline = _write(tmp_path / "dmp.json", _evaluation("peg", [100.0] * 10))
-    # Above the baseline on 8 starts, below on 1, equal on 1.
+    base_success = [False] * 5 + [True] * 5
+    baseline = _write(tmp_path / "dmp.json", _evaluation("peg", [100.0] * 10, success=base_success))
+    # Above the baseline on 8 starts, below on 1, equal on 1; inserts 4 of the
+    # baseline's 5 failures and loses 1 of its 5 successes.
     peaks = [110.0] * 8 + [90.0, 100.0]
-    policy = _write(tmp_path / "policy.json", _evaluation("peg", peaks))
+    success = [True] * 4 + [False, False] + [True] * 4
+    policy = _write(tmp_path / "policy.json", _evaluation("peg", peaks, success=success))
     data = paired_forces(baseline, [policy], ["rLfD"], name="toy")
     (column,) = data["columns"]
     peak = column["peak"]
@@ -57,10 +67,17 @@ def test_paired_forces_compares_start_by_start(tmp_path, monkeypatch):
     assert peak["median_ratio"] == pytest.approx(1.1)
     assert peak["sign_test_p"] == pytest.approx(2 * (1 + 9) / 2**9)
     assert column["low_passed"]["mean_n"] == pytest.approx(53.5)
+    assert column["outcomes"] == {"gained": 4, "lost": 1, "sign_test_p": sign_test_p(4, 1)}
+    assert sign_test_p(4, 1) == pytest.approx(2 * 6 / 32)
     stored = json.loads((tmp_path / "results" / "paired_forces_toy.json").read_text())
     assert stored["data"]["baseline"]["file"] == baseline
     markdown = (tmp_path / "results" / "paired_forces_toy.md").read_text()
-    assert "| rLfD | 50.0 % | 107 / 100 | 1.10 | 8 / 1 |" in markdown
+    assert "| rLfD | 50.0 % | 4 / 1 (0.38) | 107 / 100 | 1.10 | 8 / 1 |" in markdown
+    # Episode tables without a success column: no outcomes, a dash in the table.
+    old_base = _write(tmp_path / "old_dmp.json", _evaluation("peg", [100.0] * 10))
+    old = paired_forces(old_base, [policy], ["rLfD"])
+    assert old["columns"][0]["outcomes"] is None
+    assert "| rLfD | 50.0 % | - | 107 / 100 |" in paired_forces_markdown(old)
     with pytest.raises(FileExistsError, match="pass --overwrite"):
         paired_forces(baseline, [policy], name="toy")
     assert math.isclose(
