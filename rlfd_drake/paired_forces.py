@@ -43,7 +43,8 @@ def sign_test_p(n_above: int, n_below: int) -> float:
     n = n_above + n_below
     if n == 0:
         return 1.0
-    tail = sum(math.comb(n, i) for i in range(min(n_above, n_below) + 1)) / 2.0**n
+    # Integer numerator and denominator: 2.0**n overflows a float beyond n = 1023 starts.
+    tail = sum(math.comb(n, i) for i in range(min(n_above, n_below) + 1)) / 2**n
     return min(1.0, 2.0 * tail)
 
 

@@ -46,6 +46,10 @@ def test_sign_test_matches_the_binomial_tails():
     assert sign_test_p(8, 2) == pytest.approx(2 * 56 / 1024)
     assert sign_test_p(2, 8) == sign_test_p(8, 2)
     assert sign_test_p(5, 5) == 1.0 and sign_test_p(0, 0) == 1.0
+    # Pooled over seeds, thousands of starts: no float overflow, and the normal
+    # approximation's p (z = 106 / sqrt(1200) = 3.06 -> 0.0022) within rounding.
+    assert sign_test_p(653, 547) == pytest.approx(0.0025, abs=3e-4)
+    assert sign_test_p(1500, 1500) == 1.0 and 0.0 <= sign_test_p(3000, 0) < 1e-300
     with pytest.raises(ValueError, match="counts must be >= 0"):
         sign_test_p(-1, 3)
 
