@@ -207,6 +207,29 @@ def test_the_shipped_full_pose_peg_policy_was_trained_on_the_wide_error_and_runs
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
 
 
+def test_the_shipped_peg_copy_policy_records_its_teacher_and_cost_and_runs_on_peg():
+    """models/policies/peg_ppo_imitate_peak_cost.zip (results/full_pose_study.md, section
+    26): PPO from a copy of the search with the slope's turn, charged for the one-step
+    peak above 116 N; its sidecar says so, and the network runs alone on the shipped peg."""
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.paths import SHIPPED_PEG_IMITATION_POLICY, models_dir
+    from rlfd_drake.policies import load_sb3_model, training_config_file
+
+    shipped = models_dir() / SHIPPED_PEG_IMITATION_POLICY
+    model, kind = load_sb3_model(shipped)
+    assert kind == "ppo"
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert (config["task"], config["imitate"], config["seed"]) == (
+        "peg",
+        "force_search_and_slope",
+        2,
+    )
+    assert (config["peak_force_cost"], config["peak_force_threshold_n"]) == (0.5, 116.0)
+    assert config["peak_force_signal"] == "one_step" and config["base_correction"] is None
+    result = evaluate("peg", str(shipped), 1, 0, workers=1, progress=False)
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
+
+
 def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     """rlfd plot: the stored evaluations, one panel per task, without running anything."""
     from PIL import Image
