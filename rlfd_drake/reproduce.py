@@ -488,23 +488,27 @@ RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
 }
 # The same recipe on peg (section 8's peg flags, 700 episodes): results/full_pose_study.md,
 # section 24.
+_PEG_SLOPE_TEACHER_FLAGS = (
+    f"{_LINEAR_LR_FLAGS} --imitate force_search_and_slope --imitation-episodes 200"
+)
 RUNS["ppo_imitate_fs_slope_lrlin"] = {
     "peg": _run(
         "runs/peg_ppo_std2_so_imitate_fsslope_tt_lrlin_e700_s0",
         "peg",
         700,
-        f"{_LINEAR_LR_FLAGS} --imitate force_search_and_slope --imitation-episodes 200",
+        _PEG_SLOPE_TEACHER_FLAGS,
         "ppo",
     )
 }
 # The same peg recipe with a cost of 0.5 per newton of the one-step peak contact force
-# above 116 N (the DMP's mean peak on these starts): full_pose_study.md, sections 25-26.
+# above 116 N (the DMP's mean peak on the validation starts): full_pose_study.md,
+# sections 25-26.
 RUNS["ppo_imitate_fs_slope_lrlin_peak_cost"] = {
     "peg": _run(
         "runs/peg_ppo_std2_so_imitate_fsslope_tt_lrlin_pfc05_1step116_e700_s0",
         "peg",
         700,
-        f"{_LINEAR_LR_FLAGS} --imitate force_search_and_slope --imitation-episodes 200 "
+        f"{_PEG_SLOPE_TEACHER_FLAGS} "
         "--peak-force-cost 0.5 --peak-force-threshold-n 116 --peak-force-signal one_step",
         "ppo",
     )
