@@ -22,9 +22,10 @@ residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush
 same whose residual may not push down), ``incremental_push2mm`` /
 ``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
 ``6_wrist_smooth``, ``6_incremental`` and ``6_incremental_nopush`` (Table VI between
-those variants of gear and RJ-45), ``rj45_imitation`` (RJ-45 with PPO started from a
-copy of the force-guided search); 5 and the force tables reuse the other tables'
-evaluations.
+those variants of gear and RJ-45), ``6_peg_gear`` (the same question between peg and
+gear, whose rate residuals share their action), ``rj45_imitation`` (RJ-45 with PPO
+started from a copy of the force-guided search); 5 and the force tables reuse the other
+tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one is listed as "not run" with the command that trains it,
@@ -248,28 +249,33 @@ _PPO_STD2_EXTRA = {
 _PPO_STD2_TAG = {"peg": "so_tt", "gear": "so_tt", "rj45": "so_torque005_pen1_tt"}
 
 
-#: Section 8's recipe tag of a fine-tune that reads the observation as the other task's
-#: policy does: gear with RJ-45's torque scale, RJ-45 with gear's (the default).
-_PPO_STD2_TAG_OTHER_READING = {"gear": "so_torque005_tt", "rj45": "so_pen1_tt"}
-
-
 def _ppo_std2_run(
-    path: str, task: str, episodes: int, tag: str = "", from_other_task: str | None = None
+    path: str,
+    task: str,
+    episodes: int,
+    tag: str = "",
+    from_other_task: str | None = None,
+    source_task: str | None = None,
 ):
     """Section 8's PPO recipe for ``task`` ("peg", "gear" or "rj45") on ``path`` (the
     task or a variant): ``episodes`` episodes into
     runs/<path's stem>_ppo_std2_<recipe tag><tag>_e<episodes>_s0. With
-    ``from_other_task`` (the run folder of the gear or RJ-45 policy the other one is
-    fine-tuned from) the run starts from that policy and reads the observation as it
-    does (its torque scale is in the copied networks; ``train.copy_policy_parameters``
-    refuses another)."""
+    ``from_other_task`` (the run folder of the ``source_task`` policy this one is
+    fine-tuned from; by default gear's for RJ-45 and RJ-45's for gear) the run starts
+    from that policy and reads the observation as it does: with RJ-45's torque scale
+    exactly when the source is RJ-45's (the scale is in the copied networks;
+    ``train.copy_policy_parameters`` refuses another). The recipe tag then says so:
+    gear from RJ-45 "so_torque005_tt", RJ-45 from gear "so_pen1_tt"."""
     flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
     if from_other_task is not None:
+        source_task = source_task or {"gear": "rj45", "rj45": "gear"}[task]
         flags = flags.replace(_RJ45_TORQUE_FLAG, "")
-        if task == "gear":
+        reads_torque = source_task == "rj45"
+        if reads_torque:
             flags += f" {_RJ45_TORQUE_FLAG}"
         flags += f" --init-from {from_other_task}/policy.zip"
-        recipe_tag = _PPO_STD2_TAG_OTHER_READING[task]
+        penalty = "_pen1" if "--force-limit-penalty" in flags else ""
+        recipe_tag = f"so{'_torque005' if reads_torque else ''}{penalty}_tt"
     folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
     return _run(folder, path, episodes, " ".join(flags.split()), "ppo")
 
@@ -369,13 +375,14 @@ def _add_ppo_transfer_runs(
     suffix: str, variants: dict[str, str], full: dict[str, tuple[str, str]] | None = None
 ) -> None:
     """RUNS["ppo_full" + suffix] (``full``, path -> run; default: section 8's recipe for
-    700 episodes on each of ``variants``' gear and rj45), ["ppo_source_as_is" + suffix],
-    ["ppo_scratch_60" + suffix] and ["ppo_from_source_60" + suffix]: Table VI's PPO rows
-    between them."""
+    700 episodes on each of ``variants``' two tasks, task -> path), ["ppo_source_as_is"
+    + suffix], ["ppo_scratch_60" + suffix] and ["ppo_from_source_60" + suffix]: Table
+    VI's PPO rows between them (the paper's pair is gear and rj45)."""
     if full is None:
         full = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
     RUNS[f"ppo_full{suffix}"] = full
-    pairs = (("gear", "rj45"), ("rj45", "gear"))
+    first, second = variants
+    pairs = ((first, second), (second, first))
     RUNS[f"ppo_source_as_is{suffix}"] = {
         variants[target]: full[variants[source]] for target, source in pairs
     }
@@ -390,6 +397,7 @@ def _add_ppo_transfer_runs(
             60,
             f"_from_{Path(variants[source]).stem}",
             from_other_task=full[variants[source]][0],
+            source_task=source,
         )
         for target, source in pairs
     }
@@ -683,11 +691,14 @@ _SHIPPED_SAC = Row(
 )
 
 
-def _transfer_rows(label: str, full_runs: str, suffix: str, algo: str = "sac") -> list[Row]:
-    """Table VI's rows (mean action and sampled) from the runs that
-    :func:`_add_sac_transfer_runs` (or, with ``algo="ppo"``, :func:`_add_ppo_transfer_runs`)
-    named with ``suffix``."""
-    return [
+def _transfer_rows(
+    label: str, full_runs: str, suffix: str, algo: str = "sac", sampled: bool = True
+) -> list[Row]:
+    """Table VI's rows (mean action, and with ``sampled`` sampled actions) from the runs
+    that :func:`_add_sac_transfer_runs` (or, with ``algo="ppo"``,
+    :func:`_add_ppo_transfer_runs`) named with ``suffix``, beside the paper's gear and
+    RJ-45 figures."""
+    rows = [
         row
         for what, key, paper in (
             ("full training on the target", full_runs, (92.2, 70.6)),
@@ -699,6 +710,7 @@ def _transfer_rows(label: str, full_runs: str, suffix: str, algo: str = "sac") -
             f"{label}: {what}", f"run:{key}", dict(zip(("gear", "rj45"), paper, strict=True))
         )
     ]
+    return rows if sampled else [row for row in rows if not row.stochastic]
 
 
 TABLES: dict[str, Table] = {
@@ -1090,13 +1102,35 @@ TABLES["6_wrist_smooth"] = Table(
     "its physical robot.",
 )
 
-TABLES["6_incremental"] = Table(
+
+def _ppo_transfer_table(
+    title: str,
+    variants: dict[str, str],
+    label: str,
+    suffix: str,
+    note: str,
+    sampled: bool = True,
+    evaluation_episodes: int | None = None,
+) -> Table:
+    """Table VI's PPO rows between ``variants`` (column -> task path; the runs of
+    :func:`_add_ppo_transfer_runs` named with ``suffix``; with ``sampled`` also their
+    sampled actions) under the paper's DMP row (Table IV's figures)."""
+    paper_dmp = {"gear": 41.5, "rj45": 0.0, "peg": 52.6}
+    rows = _transfer_rows(label, f"ppo_full{suffix}", suffix, "ppo", sampled)
+    return Table(
+        title,
+        dict(variants),
+        [Row("DMP alone", "dmp", {column: paper_dmp[column] for column in variants}), *rows],
+        note,
+        evaluation_episodes=evaluation_episodes,
+    )
+
+
+TABLES["6_incremental"] = _ppo_transfer_table(
     "Table VI between the incremental variants of gear and RJ-45 (full-pose PPO)",
-    {"gear": _TRANSFER_INCREMENTAL["gear"], "rj45": _TRANSFER_INCREMENTAL["rj45"]},
-    [
-        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
-        *_transfer_rows("PPO, incremental", "ppo_full_incremental", "_incremental", algo="ppo"),
-    ],
+    _TRANSFER_INCREMENTAL,
+    "PPO, incremental",
+    "_incremental",
     "Table VI's PPO rows between models/tasks/variants/gear_incremental.yaml and "
     "rj45_slow_insert_incremental.yaml, whose residual action is a rate "
     "(residual_rate_per_s = 2), with section 8's PPO recipe (RJ-45 with its contact-torque "
@@ -1109,18 +1143,11 @@ TABLES["6_incremental"] = Table(
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
 )
 
-TABLES["6_incremental_nopush"] = Table(
+TABLES["6_incremental_nopush"] = _ppo_transfer_table(
     "Table VI between the no-push incremental variants of gear and RJ-45 (full-pose PPO)",
-    {"gear": _TRANSFER_NOPUSH["gear"], "rj45": _TRANSFER_NOPUSH["rj45"]},
-    [
-        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
-        *_transfer_rows(
-            "PPO, incremental, no push",
-            "ppo_full_incremental_nopush",
-            "_incremental_nopush",
-            algo="ppo",
-        ),
-    ],
+    _TRANSFER_NOPUSH,
+    "PPO, incremental, no push",
+    "_incremental_nopush",
     "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
     "rj45_slow_insert_incremental_nopush.yaml: the residual action is a rate and its "
     "offset may not move the part below the DMP's path, so the DMP does all the pressing "
@@ -1130,6 +1157,40 @@ TABLES["6_incremental_nopush"] = Table(
     "the source's networks with a new optimiser and read the observation as the source "
     "does. A residual of 1 is 1 cm / 5 deg on gear and 3 mm / 3 deg on RJ-45. The "
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
+)
+
+# Table VI's question between the two tasks whose best recipes share the residual: peg
+# and gear, both with the rate residual and section 8's PPO recipe (peg's 700 episodes
+# pushing, gear's 1,400 not pushing, the step falling to zero), so a copied policy's
+# action means the same on its new task. results/full_pose_study.md, section 27.
+_TRANSFER_PEG_GEAR = {"gear": _INCREMENTAL_NOPUSH["gear"], "peg": _INCREMENTAL["peg"]}
+_add_ppo_transfer_runs(
+    "_peg_gear",
+    _TRANSFER_PEG_GEAR,
+    full={
+        _TRANSFER_PEG_GEAR["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][
+            _TRANSFER_PEG_GEAR["gear"]
+        ],
+        _TRANSFER_PEG_GEAR["peg"]: RUNS["rlfd_ppo_incremental_lrlin"][_TRANSFER_PEG_GEAR["peg"]],
+    },
+)
+TABLES["6_peg_gear"] = _ppo_transfer_table(
+    "Table VI's transfer between peg and gear, whose residuals share their action (full-pose PPO)",
+    _TRANSFER_PEG_GEAR,
+    "PPO, incremental",
+    "_peg_gear",
+    "Not a table of the paper, whose transfer is between gear and RJ-45 (its gear column "
+    "is beside ours for scale; our source of gear is the peg policy). Between "
+    "models/tasks/variants/gear_incremental_nopush.yaml and peg_incremental.yaml, whose "
+    "residual action is the same rate (residual_rate_per_s = 2; 1 cm / 5 deg per unit) "
+    "read from the same scaled observation; gear's offset may not move the part below "
+    "the DMP's path, so a copied peg policy's push is clipped there. Full training is "
+    "one run with the step size falling to zero (peg 700 episodes, gear 1,400); the "
+    "60-episode runs keep a constant step (4-5 PPO updates), the fine-tunes from the "
+    "source's networks with a new optimiser. Mean action, 200 test starts (evaluation "
+    "seed 0). The paper's DMP row is Table IV's.",
+    sampled=False,
+    evaluation_episodes=200,
 )
 
 

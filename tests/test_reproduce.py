@@ -554,6 +554,51 @@ def test_the_no_push_transfer_fine_tunes_the_other_tasks_falling_step_size_polic
     assert "PPO, incremental, no push: 60 episodes from the source, mean action" in labels
 
 
+def test_the_peg_gear_transfer_fine_tunes_each_tasks_best_rate_policy_reading_as_it_does():
+    """Table VI between peg and gear: full training is each task's falling-step run (peg
+    700 episodes, gear 1,400 without push); the 60-episode runs keep the constant step,
+    the fine-tunes start from the other task's full run, and neither reads RJ-45's torque
+    scale (neither source does), on 200 test starts with the mean action only."""
+    from rlfd_drake.cli import build_parser
+
+    runs = reproduce.RUNS
+    tasks = {
+        "gear": "models/tasks/variants/gear_incremental_nopush.yaml",
+        "peg": "models/tasks/variants/peg_incremental.yaml",
+    }
+    parse = build_parser().parse_args
+    for target, source, episodes in (("gear", "peg", 1400), ("peg", "gear", 700)):
+        full = parse(runs["ppo_full_peg_gear"][tasks[target]][1].split()[1:])
+        source_full = parse(runs["ppo_full_peg_gear"][tasks[source]][1].split()[1:])
+        assert (full.task, full.episodes, full.learning_rate_schedule) == (
+            tasks[target],
+            episodes,
+            "linear",
+        )
+        assert runs["ppo_source_as_is_peg_gear"][tasks[target]][0] == source_full.out
+        folder, command = runs["ppo_from_source_60_peg_gear"][tasks[target]]
+        assert folder.endswith(f"_so_tt_from_{Path(tasks[source]).stem}_e60_s0")
+        fine_tune = parse(command.split()[1:])
+        assert (fine_tune.task, fine_tune.episodes, fine_tune.out) == (tasks[target], 60, folder)
+        assert fine_tune.init_from == f"{source_full.out}/policy.zip"
+        assert fine_tune.learning_rate_schedule == "constant"
+        torque_scales = {
+            fine_tune.contact_torque_nm,
+            full.contact_torque_nm,
+            source_full.contact_torque_nm,
+        }
+        assert len(torque_scales) == 1
+        assert fine_tune.force_limit_penalty == full.force_limit_penalty == 0.0
+        scratch = parse(runs["ppo_scratch_60_peg_gear"][tasks[target]][1].split()[1:])
+        assert (scratch.task, scratch.init_from, scratch.episodes) == (tasks[target], None, 60)
+    table = reproduce.TABLES["6_peg_gear"]
+    assert table.columns == tasks and table.evaluation_episodes == 200
+    assert not any(row.stochastic for row in table.rows)
+    assert "PPO, incremental: 60 episodes from the source, mean action" in [
+        row.label for row in table.rows
+    ]
+
+
 def test_the_imitation_table_evaluates_the_copy_and_both_stages_on_rj45s_whole_grid(
     tmp_path, monkeypatch
 ):
