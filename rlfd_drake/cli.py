@@ -414,6 +414,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             seed=args.seed,
             workers=args.workers,
             training_seeds=tuple(args.training_seeds),
+            train_missing=args.train_missing,
         )
     return 0
 
@@ -915,6 +916,14 @@ def build_parser() -> argparse.ArgumentParser:
         "runs/<folder>_s<seed>); writes results/table_<n>_training_seeds_<seeds>",
     )
     reproduce.add_argument("--workers", type=int, default=2)
+    reproduce.add_argument(
+        "--train-missing",
+        action="store_true",
+        help="train the deep-RL runs (RUNS) a row needs that have neither a policy in runs/ "
+        "nor a stored evaluation, and what they start from, by their rlfd train commands "
+        "(resumed if interrupted; 5-45 min each on 2 cores); without it they are listed "
+        "as not run, with the command",
+    )
     reproduce.set_defaults(func=_cmd_reproduce)
 
     keep = sub.add_parser(

@@ -28,8 +28,10 @@ started from a copy of the force-guided search); 5 and the force tables reuse th
 tables' evaluations.
 Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table VI's
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
-and the commands); a missing one is listed as "not run" with the command that trains it,
-since each takes 5-45 minutes on 2 cores.
+and the commands); a missing one (no policy in its folder, no stored evaluation) is
+listed as "not run" with the command that trains it, since each takes 5-45 minutes on 2
+cores, unless ``train_missing`` (``rlfd reproduce --train-missing``) trains it there and
+then (:func:`train_run`: by its command, after the run it starts from, resumable).
 
 Training seeds: every run in ``RUNS`` trains with seed 0; ``--training-seeds 0 1 2``
 reports each "run:" row as the mean +- sample std over those seeds' runs
@@ -50,6 +52,9 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
+import subprocess
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -69,6 +74,7 @@ __all__ = [
     "reproduce_table",
     "seeded_run",
     "stored_or_new_evaluation",
+    "train_run",
 ]
 
 #: (baseline training episodes, evaluation episodes per task).
@@ -170,6 +176,37 @@ def seeded_run(run: tuple[str, str], training_seed: int) -> tuple[str, str]:
     suffix = f"_s{training_seed}"
     command = re.sub(r"_s0\b", suffix, command).replace(" --seed 0 ", f" --seed {training_seed} ")
     return re.sub(r"_s0\b", suffix, folder), command
+
+
+def _seeded_commands(training_seed: int) -> dict[str, str]:
+    """Every run folder of RUNS, as trained with ``training_seed``, -> its command."""
+    return dict(seeded_run(run, training_seed) for runs in RUNS.values() for run in runs.values())
+
+
+def train_run(folder: str, command: str, training_seed: int = 0) -> None:
+    """Trains the run ``folder`` of RUNS by its ``command`` (``rlfd train ...``, as a
+    user types it, in a subprocess; with ``--resume``, so an interrupted run continues
+    from its newest checkpoint and a finished one is not retrained), after the run it
+    starts from (``--init-from <run>/policy.zip``) where that is a RUNS run of the same
+    training seed without its policy yet. FileNotFoundError names a source that is
+    neither here nor trainable."""
+    source = re.search(r"--init-from (\S+)/policy\.zip", command)
+    if source is not None and not (Path(source[1]) / "policy.zip").exists():
+        commands = _seeded_commands(training_seed)
+        if source[1] not in commands:
+            raise FileNotFoundError(
+                f"{folder} starts from {source[1]}/policy.zip, which is neither here nor "
+                "a run rlfd reproduce knows how to train"
+            )
+        train_run(source[1], commands[source[1]], training_seed)
+    if (Path(folder) / "policy.zip").exists():
+        return
+    program, subcommand, *arguments = shlex.split(command)
+    if (program, subcommand) != ("rlfd", "train"):
+        raise ValueError(f"run {folder}'s command must be 'rlfd train ...', got {command!r}")
+    print(f"training {folder}: {command}", flush=True)
+    argv = [sys.executable, "-m", "rlfd_drake.cli", "train", *arguments]
+    subprocess.run([*argv, "--resume", "--no-progress"], check=True)
 
 
 #: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
@@ -1454,10 +1491,13 @@ def _cell(
     metric: str = "success",
     evaluation_episodes: int | None = None,
     training_seed: int = 0,
+    train_missing: bool = False,
 ) -> tuple[dict, dict | None]:
     """The table cell of ``row`` on ``task`` and the evaluation it reports (None
-    when not run); ``evaluation_episodes`` overrides the budget's starts and
-    ``training_seed`` picks a "run:" row's run (``seeded_run``)."""
+    when not run); ``evaluation_episodes`` overrides the budget's starts,
+    ``training_seed`` picks a "run:" row's run (``seeded_run``) and ``train_missing``
+    trains a "run:" row's run that has neither its policy here nor a stored evaluation
+    (:func:`train_run`) instead of listing it as not run."""
     from rlfd_drake.evaluate import NAMED_POLICIES, policy_stem, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
@@ -1523,6 +1563,9 @@ def _cell(
     if result is None and kind == "baseline":
         _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
         result = evaluation(True)
+    if result is None and kind == "run" and train_missing:
+        train_run(folder, command, training_seed)
+        result = evaluation(True)
     if result is None:
         return {"status": "not run", "reason": missing}, None
     by_outcome = result.get("forces_by_outcome", {})
@@ -1576,6 +1619,7 @@ def _cell_over_seeds(
     metric: str,
     evaluation_episodes: int | None,
     training_seeds: tuple[int, ...],
+    train_missing: bool = False,
 ) -> tuple[dict, dict | None]:
     """``_cell`` for each training seed of a "run:" row (other rows: one cell, as they
     are trained once), and, with several seeds, one cell with the mean over the seeds
@@ -1585,7 +1629,7 @@ def _cell_over_seeds(
     if not row.source.startswith("run:"):
         return _cell(row, task, budget, seed, workers, metric, evaluation_episodes)
     per_seed = {
-        s: _cell(row, task, budget, seed, workers, metric, evaluation_episodes, s)
+        s: _cell(row, task, budget, seed, workers, metric, evaluation_episodes, s, train_missing)
         for s in training_seeds
     }
     if len(training_seeds) == 1:
@@ -1785,10 +1829,12 @@ def reproduce_table(
     seed: int = 0,
     workers: int = 2,
     training_seeds: tuple[int, ...] = (0,),
+    train_missing: bool = False,
 ) -> dict:
     """Measures every runnable cell of table ``number``, "run:" rows over
-    ``training_seeds`` (``_cell_over_seeds``); writes results/<table_name>.{md,json,png}
-    (the figure: see ``_plot``)."""
+    ``training_seeds`` (``_cell_over_seeds``; with ``train_missing`` training the runs
+    that have neither a policy here nor a stored evaluation); writes
+    results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
     if number not in TABLES:
         raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
     if budget not in BUDGETS:
@@ -1808,6 +1854,7 @@ def reproduce_table(
                 table.metric,
                 table.evaluation_episodes,
                 training_seeds,
+                train_missing,
             )
             for column, task in table.columns.items()
         }

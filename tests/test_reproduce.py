@@ -152,6 +152,91 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
     )
 
 
+def _recording_trainer(monkeypatch, calls):
+    """subprocess.run as ``rlfd train`` would leave it: the --out folder gets a policy."""
+
+    def run(argv, check):
+        assert check and argv[:4] == [reproduce.sys.executable, "-m", "rlfd_drake.cli", "train"]
+        calls.append(argv)
+        out = Path(argv[argv.index("--out") + 1])
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "policy.zip").write_bytes(b"")
+
+    monkeypatch.setattr(reproduce.subprocess, "run", run)
+
+
+@pytest.mark.parametrize("training_seed", [0, 2])
+def test_a_missing_run_is_trained_after_the_run_it_starts_from(
+    tmp_path, monkeypatch, training_seed
+):
+    """A fine-tune trains its source first (the same training seed's), each by its
+    command with --resume (an interrupted run continues), and nothing trains twice."""
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    gear = "models/tasks/variants/gear_incremental_nopush.yaml"
+    run = reproduce.seeded_run(reproduce.RUNS["ppo_from_source_60_peg_gear"][gear], training_seed)
+    source = reproduce.seeded_run(
+        reproduce.RUNS["ppo_full_peg_gear"]["models/tasks/variants/peg_incremental.yaml"],
+        training_seed,
+    )
+    reproduce.train_run(*run, training_seed)
+    assert [argv[argv.index("--out") + 1] for argv in calls] == [source[0], run[0]]
+    assert all(argv[-2:] == ["--resume", "--no-progress"] for argv in calls)
+    assert calls[1][4:-2] == run[1].split()[2:]
+    assert f"--seed {training_seed}" in " ".join(calls[0])
+    reproduce.train_run(*run, training_seed)
+    assert len(calls) == 2
+
+
+def test_a_run_whose_source_cannot_be_trained_is_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    command = "rlfd train --task peg --algo ppo --episodes 60 --init-from runs/elsewhere/policy.zip"
+    with pytest.raises(FileNotFoundError, match="runs/elsewhere/policy.zip"):
+        reproduce.train_run("runs/peg_from_elsewhere", f"{command} --out runs/peg_from_elsewhere")
+    with pytest.raises(ValueError, match="rlfd train"):
+        reproduce.train_run("runs/x", "rlfd evaluate --task peg --out runs/x")
+    assert calls == []
+
+
+def test_train_missing_fills_the_rows_that_have_no_policy_and_no_stored_evaluation(
+    tmp_path, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
+    rows = {row["label"]: row["ours"] for row in reproduce.reproduce_table("6_peg_gear")["rows"]}
+    assert (
+        calls == []
+        and rows["PPO, incremental: 60 episodes from the source, mean action"]["peg"]["status"]
+        == "not run"
+    )
+    data = reproduce.reproduce_table("6_peg_gear", train_missing=True)
+    assert all(
+        cell["status"] == "measured" for row in data["rows"] for cell in row["ours"].values()
+    )
+    trained = sorted(argv[argv.index("--out") + 1] for argv in calls)
+    expected = {
+        run[0]
+        for key in ("ppo_full", "ppo_scratch_60", "ppo_from_source_60")
+        for run in reproduce.RUNS[f"{key}_peg_gear"].values()
+    }
+    assert trained == sorted(expected)
+
+
+def test_train_run_trains_a_real_run_by_its_command(tmp_path, monkeypatch):
+    """The subprocess is the user's rlfd train: two PPO episodes leave a policy."""
+    monkeypatch.chdir(tmp_path)
+    folder = "runs/peg_easy_ppo_tiny_s0"
+    command = f"rlfd train --task peg_easy --algo ppo --episodes 2 --seed 0 --envs 1 --out {folder}"
+    reproduce.train_run(folder, command)
+    assert (tmp_path / folder / "policy.zip").stat().st_size > 0
+    assert json.loads((tmp_path / folder / "metrics.json").read_text())["episodes"] >= 2
+
+
 @pytest.mark.parametrize(("table", "budget"), [("9", "quick"), ("1", "huge")])
 def test_reproduce_rejects_unknown_tables_and_budgets(table, budget):
     with pytest.raises(ValueError, match="table|budget"):
