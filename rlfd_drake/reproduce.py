@@ -1148,16 +1148,22 @@ def _ppo_transfer_table(
     note: str,
     sampled: bool = True,
     evaluation_episodes: int | None = None,
+    extra_rows: tuple[Row, ...] = (),
 ) -> Table:
     """Table VI's PPO rows between ``variants`` (column -> task path; the runs of
     :func:`_add_ppo_transfer_runs` named with ``suffix``; with ``sampled`` also their
-    sampled actions) under the paper's DMP row (Table IV's figures)."""
+    sampled actions) under the paper's DMP row (Table IV's figures), then
+    ``extra_rows``."""
     paper_dmp = {"gear": 41.5, "rj45": 0.0, "peg": 52.6}
     rows = _transfer_rows(label, f"ppo_full{suffix}", suffix, "ppo", sampled)
     return Table(
         title,
         dict(variants),
-        [Row("DMP alone", "dmp", {column: paper_dmp[column] for column in variants}), *rows],
+        [
+            Row("DMP alone", "dmp", {column: paper_dmp[column] for column in variants}),
+            *rows,
+            *extra_rows,
+        ],
         note,
         evaluation_episodes=evaluation_episodes,
     )
@@ -1211,6 +1217,22 @@ _add_ppo_transfer_runs(
         _TRANSFER_PEG_GEAR["peg"]: RUNS["rlfd_ppo_incremental_lrlin"][_TRANSFER_PEG_GEAR["peg"]],
     },
 )
+# Added after the 60-episode gear rows were read: 300 gear episodes with the step falling
+# to zero (the full recipe's schedule), from peg's policy and from zero.
+_PEG_FULL = RUNS["ppo_full_peg_gear"][_TRANSFER_PEG_GEAR["peg"]][0]
+RUNS["ppo_from_source_300_lrlin_peg_gear"] = {
+    _TRANSFER_PEG_GEAR["gear"]: _run(
+        f"runs/{Path(_TRANSFER_PEG_GEAR['gear']).stem}_ppo_std2_so_tt_lrlin_from_"
+        f"{Path(_TRANSFER_PEG_GEAR['peg']).stem}_e300_s0",
+        _TRANSFER_PEG_GEAR["gear"],
+        300,
+        f"{_LINEAR_LR_FLAGS} --init-from {_PEG_FULL}/policy.zip",
+        "ppo",
+    )
+}
+RUNS["ppo_scratch_300_lrlin_peg_gear"] = {
+    _TRANSFER_PEG_GEAR["gear"]: _linear_lr_run(_TRANSFER_PEG_GEAR["gear"], 300)
+}
 TABLES["6_peg_gear"] = _ppo_transfer_table(
     "Table VI's transfer between peg and gear, whose residuals share their action (full-pose PPO)",
     _TRANSFER_PEG_GEAR,
@@ -1228,6 +1250,16 @@ TABLES["6_peg_gear"] = _ppo_transfer_table(
     "seed 0). The paper's DMP row is Table IV's.",
     sampled=False,
     evaluation_episodes=200,
+    extra_rows=tuple(
+        Row(f"{what}, step falling to zero, mean action", f"run:{key}", {})
+        for what, key in (
+            ("PPO, incremental: 300 episodes from scratch", "ppo_scratch_300_lrlin_peg_gear"),
+            (
+                "PPO, incremental: 300 episodes from the source",
+                "ppo_from_source_300_lrlin_peg_gear",
+            ),
+        )
+    ),
 )
 
 
