@@ -287,30 +287,24 @@ _PPO_STD2_TAG = {"peg": "so_tt", "gear": "so_tt", "rj45": "so_torque005_pen1_tt"
 
 
 def _ppo_std2_run(
-    path: str,
-    task: str,
-    episodes: int,
-    tag: str = "",
-    from_other_task: str | None = None,
-    source_task: str | None = None,
+    path: str, task: str, episodes: int, tag: str = "", source: tuple[str, str] | None = None
 ):
     """Section 8's PPO recipe for ``task`` ("peg", "gear" or "rj45") on ``path`` (the
     task or a variant): ``episodes`` episodes into
-    runs/<path's stem>_ppo_std2_<recipe tag><tag>_e<episodes>_s0. With
-    ``from_other_task`` (the run folder of the ``source_task`` policy this one is
-    fine-tuned from; by default gear's for RJ-45 and RJ-45's for gear) the run starts
-    from that policy and reads the observation as it does: with RJ-45's torque scale
-    exactly when the source is RJ-45's (the scale is in the copied networks;
+    runs/<path's stem>_ppo_std2_<recipe tag><tag>_e<episodes>_s0. With ``source`` (the
+    other task's name and the run folder of its policy) the run starts from that policy
+    and reads the observation as it does: with RJ-45's torque scale exactly when the
+    source is RJ-45's (the scale is in the copied networks;
     ``train.copy_policy_parameters`` refuses another). The recipe tag then says so:
     gear from RJ-45 "so_torque005_tt", RJ-45 from gear "so_pen1_tt"."""
     flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
-    if from_other_task is not None:
-        source_task = source_task or {"gear": "rj45", "rj45": "gear"}[task]
+    if source is not None:
+        source_task, source_folder = source
         flags = flags.replace(_RJ45_TORQUE_FLAG, "")
         reads_torque = source_task == "rj45"
         if reads_torque:
             flags += f" {_RJ45_TORQUE_FLAG}"
-        flags += f" --init-from {from_other_task}/policy.zip"
+        flags += f" --init-from {source_folder}/policy.zip"
         penalty = "_pen1" if "--force-limit-penalty" in flags else ""
         recipe_tag = f"so{'_torque005' if reads_torque else ''}{penalty}_tt"
     folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
@@ -366,11 +360,18 @@ _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second
 _LINEAR_LR_FLAGS = f"{_PPO_STD2_FLAGS} --learning-rate-schedule linear"
 
 
-def _linear_lr_run(path: str, episodes: int) -> tuple[str, str]:
+def _linear_lr_run(
+    path: str, episodes: int, source: tuple[str, str] | None = None
+) -> tuple[str, str]:
     """One run of section 8's PPO recipe on task ``path`` with the step size falling to
-    zero over ``episodes``."""
-    folder = f"runs/{Path(path).stem}_ppo_std2_so_tt_lrlin_e{episodes}_s0"
-    return _run(folder, path, episodes, _LINEAR_LR_FLAGS, "ppo")
+    zero over ``episodes``; with ``source`` (another task's path and the run folder of
+    its policy) starting from that policy (folder ..._lrlin_from_<its stem>_e...)."""
+    tag, flags = "", _LINEAR_LR_FLAGS
+    if source is not None:
+        tag = f"_from_{Path(source[0]).stem}"
+        flags = f"{flags} --init-from {source[1]}/policy.zip"
+    folder = f"runs/{Path(path).stem}_ppo_std2_so_tt_lrlin{tag}_e{episodes}_s0"
+    return _run(folder, path, episodes, flags, "ppo")
 
 
 RUNS["rlfd_ppo_incremental_lrlin"] = {_INCREMENTAL["peg"]: _linear_lr_run(_INCREMENTAL["peg"], 700)}
@@ -433,8 +434,7 @@ def _add_ppo_transfer_runs(
             target,
             60,
             f"_from_{Path(variants[source]).stem}",
-            from_other_task=full[variants[source]][0],
-            source_task=source,
+            (source, full[variants[source]][0]),
         )
         for target, source in pairs
     }
@@ -1219,15 +1219,11 @@ _add_ppo_transfer_runs(
 )
 # Added after the 60-episode gear rows were read: 300 gear episodes with the step falling
 # to zero (the full recipe's schedule), from peg's policy and from zero.
-_PEG_FULL = RUNS["ppo_full_peg_gear"][_TRANSFER_PEG_GEAR["peg"]][0]
 RUNS["ppo_from_source_300_lrlin_peg_gear"] = {
-    _TRANSFER_PEG_GEAR["gear"]: _run(
-        f"runs/{Path(_TRANSFER_PEG_GEAR['gear']).stem}_ppo_std2_so_tt_lrlin_from_"
-        f"{Path(_TRANSFER_PEG_GEAR['peg']).stem}_e300_s0",
+    _TRANSFER_PEG_GEAR["gear"]: _linear_lr_run(
         _TRANSFER_PEG_GEAR["gear"],
         300,
-        f"{_LINEAR_LR_FLAGS} --init-from {_PEG_FULL}/policy.zip",
-        "ppo",
+        (_TRANSFER_PEG_GEAR["peg"], RUNS["ppo_full_peg_gear"][_TRANSFER_PEG_GEAR["peg"]][0]),
     )
 }
 RUNS["ppo_scratch_300_lrlin_peg_gear"] = {
