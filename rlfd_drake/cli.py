@@ -39,6 +39,12 @@ def _cmd_tasks(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from rlfd_drake.results import write_result
 
+    queue_flags = (args.queue_runs, args.queue_episodes, args.queue_parallel)
+    if queue_flags != (None, None, None) and args.what != "train-queue":
+        raise ValueError(
+            "--queue-runs/--queue-episodes/--queue-parallel: only the train-queue benchmark "
+            f"takes them, not {args.what!r}"
+        )
     if args.tasks and args.what != "diagram":
         raise ValueError(f"--tasks: only the diagram benchmark takes tasks, not {args.what!r}")
     name = f"bench_{args.what}"
@@ -63,6 +69,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             data = diagram.run(repeats=args.repeats, tasks=args.tasks, profile_task=args.tasks[-1])
         else:
             data = diagram.run(repeats=args.repeats)
+    elif args.what == "train-queue":
+        from rlfd_drake.bench import train_queue
+
+        runs = 4 if args.queue_runs is None else args.queue_runs
+        episodes = 10 if args.queue_episodes is None else args.queue_episodes
+        parallel = (1, 2) if args.queue_parallel is None else tuple(args.queue_parallel)
+        data = train_queue.run(
+            repeats=args.repeats, runs=runs, episodes=episodes, parallel=parallel
+        )
+        name = f"bench_train_queue_{runs}x{episodes}"
+        if args.queue_parallel is not None:
+            name += "_at_once_" + "_".join(str(p) for p in parallel)
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
     path = write_result(name, data)
@@ -205,6 +223,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 from rlfd_drake.paths import SHIPPED_POLICY  # noqa: E402  (re-exported for notebooks)
 from rlfd_drake.reproduce import TABLES  # noqa: E402  (light: numpy only; --table choices)
+from rlfd_drake.run_queue import TrainingFailed  # noqa: E402  (light: standard library only)
 
 
 def _cmd_demo_main(args: argparse.Namespace) -> int:
@@ -404,18 +423,19 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from rlfd_drake.reproduce import reproduce_table
+    from rlfd_drake.reproduce import reproduce_tables
+    from rlfd_drake.run_queue import default_parallel_runs
 
     numbers = sorted(TABLES) if args.table == "all" else [args.table]
-    for number in numbers:
-        reproduce_table(
-            number,
-            budget=args.budget,
-            seed=args.seed,
-            workers=args.workers,
-            training_seeds=tuple(args.training_seeds),
-            train_missing=args.train_missing,
-        )
+    reproduce_tables(
+        numbers,
+        budget=args.budget,
+        seed=args.seed,
+        workers=args.workers,
+        training_seeds=tuple(args.training_seeds),
+        train_missing=args.train_missing,
+        parallel_runs=default_parallel_runs() if args.parallel_runs is None else args.parallel_runs,
+    )
     return 0
 
 
@@ -615,7 +635,12 @@ def build_parser() -> argparse.ArgumentParser:
     tasks.set_defaults(func=_cmd_tasks)
 
     bench = sub.add_parser("bench", help="speed benchmarks, written to results/")
-    bench.add_argument("what", choices=["sim", "dmp", "diagram"])
+    bench.add_argument(
+        "what",
+        choices=["sim", "dmp", "diagram", "train-queue"],
+        help="train-queue: 4 short PPO runs one at a time against two at a time (rlfd "
+        "reproduce --train-missing's --parallel-runs)",
+    )
     bench.add_argument("--json", action="store_true", help="print the JSON result")
     bench.add_argument("--repeats", type=int, default=5, help="runs per figure (median)")
     bench.add_argument(
@@ -629,6 +654,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="diagram only: these task names or task YAML paths (variants), side by side "
         "in one run, written to results/bench_diagram_<A>_vs_<B>....json; the last is "
         "profiled (default: every shipped task, results/bench_diagram.json)",
+    )
+    bench.add_argument(
+        "--queue-runs", type=int, default=None, help="train-queue only: runs trained (default 4)"
+    )
+    bench.add_argument(
+        "--queue-episodes",
+        type=int,
+        default=None,
+        help="train-queue only: PPO episodes per run (default 10; results/"
+        "bench_train_queue_<runs>x<episodes>.json)",
+    )
+    bench.add_argument(
+        "--queue-parallel",
+        type=int,
+        nargs="+",
+        default=None,
+        help="train-queue only: the numbers of runs at once to compare (default 1 2; "
+        "results/bench_train_queue_<runs>x<episodes>_at_once_<p>_...json)",
     )
     bench.set_defaults(func=_cmd_bench)
 
@@ -924,6 +967,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(resumed if interrupted; 5-45 min each on 2 cores); without it they are listed "
         "as not run, with the command",
     )
+    reproduce.add_argument(
+        "--parallel-runs",
+        type=int,
+        default=None,
+        help="with --train-missing, runs trained at once (each in its own subprocess, its "
+        "output in runs/<run>.train.log when more than one; a fine-tune after its source); "
+        "default: one per core this process may use (measured fastest: rlfd bench train-queue)",
+    )
     reproduce.set_defaults(func=_cmd_reproduce)
 
     keep = sub.add_parser(
@@ -1123,6 +1174,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileExistsError, FileNotFoundError) as error:
         print(f"rlfd: error: {error}", file=sys.stderr)
         return 2
+    except TrainingFailed as error:
+        print(f"rlfd: error: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

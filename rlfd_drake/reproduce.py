@@ -30,8 +30,11 @@ Rows of deep-RL policies (rLfD per task, Table III's pure and hybrid SAC, Table 
 transfer runs) evaluate a policy trained by ``rlfd train`` (see ``RUNS`` for the folders
 and the commands); a missing one (no policy in its folder, no stored evaluation) is
 listed as "not run" with the command that trains it, since each takes 5-45 minutes on 2
-cores, unless ``train_missing`` (``rlfd reproduce --train-missing``) trains it there and
-then (:func:`train_run`: by its command, after the run it starts from, resumable).
+cores, unless ``train_missing`` (``rlfd reproduce --train-missing``) trains it first:
+every table asked is surveyed, then the runs they lack (and the runs those start from)
+train together, ``parallel_runs`` at once (``--parallel-runs``, default one per core:
+:func:`train_runs`, by their commands, a fine-tune after its source, resumable), and
+then the tables are measured.
 
 Training seeds: every run in ``RUNS`` trains with seed 0; ``--training-seeds 0 1 2``
 reports each "run:" row as the mean +- sample std over those seeds' runs
@@ -52,9 +55,6 @@ from __future__ import annotations
 
 import json
 import re
-import shlex
-import subprocess
-import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -66,15 +66,18 @@ from rlfd_drake.paths import (
 )
 from rlfd_drake.results import results_dir, spread_over_seeds, write_result
 from rlfd_drake.run_log import run_log_file
+from rlfd_drake.run_queue import TrainingJob, check_parallel_runs, train_queue
 
 __all__ = [
     "BUDGETS",
     "TABLES",
     "Row",
     "reproduce_table",
+    "reproduce_tables",
     "seeded_run",
     "stored_or_new_evaluation",
     "train_run",
+    "train_runs",
 ]
 
 #: (baseline training episodes, evaluation episodes per task).
@@ -183,30 +186,47 @@ def _seeded_commands(training_seed: int) -> dict[str, str]:
     return dict(seeded_run(run, training_seed) for runs in RUNS.values() for run in runs.values())
 
 
+def _training_jobs(runs: list[tuple[str, str, int]]) -> list[TrainingJob]:
+    """The jobs that train ``runs`` ((folder, command, training seed) of RUNS), each
+    preceded by the run it starts from (``--init-from <run>/policy.zip``) where that is a
+    RUNS run of the same training seed without its policy yet; a run named twice is
+    trained once. FileNotFoundError names a source that is neither here nor trainable."""
+    jobs: dict[str, TrainingJob] = {}
+
+    def add(folder: str, command: str, training_seed: int) -> None:
+        if folder in jobs or (Path(folder) / "policy.zip").exists():
+            return
+        source = re.search(r"--init-from (\S+)/policy\.zip", command)
+        after = None
+        if source is not None and not (Path(source[1]) / "policy.zip").exists():
+            commands = _seeded_commands(training_seed)
+            if source[1] not in commands:
+                raise FileNotFoundError(
+                    f"{folder} starts from {source[1]}/policy.zip, which is neither here "
+                    "nor a run rlfd reproduce knows how to train"
+                )
+            add(source[1], commands[source[1]], training_seed)
+            after = source[1]
+        jobs[folder] = TrainingJob(folder, command, after)
+
+    for folder, command, training_seed in runs:
+        _check_training_seed(training_seed)
+        add(folder, command, training_seed)
+    return list(jobs.values())
+
+
+def train_runs(runs: list[tuple[str, str, int]], parallel: int = 1) -> None:
+    """Trains ``runs`` ((folder, command, training seed) of RUNS) and the runs they start
+    from, up to ``parallel`` at once (:func:`rlfd_drake.run_queue.train_queue`: each by
+    its ``rlfd train`` command in a subprocess with ``--resume``, a fine-tune after its
+    source)."""
+    train_queue(_training_jobs(runs), parallel)
+
+
 def train_run(folder: str, command: str, training_seed: int = 0) -> None:
-    """Trains the run ``folder`` of RUNS by its ``command`` (``rlfd train ...``, as a
-    user types it, in a subprocess; with ``--resume``, so an interrupted run continues
-    from its newest checkpoint and a finished one is not retrained), after the run it
-    starts from (``--init-from <run>/policy.zip``) where that is a RUNS run of the same
-    training seed without its policy yet. FileNotFoundError names a source that is
-    neither here nor trainable."""
-    source = re.search(r"--init-from (\S+)/policy\.zip", command)
-    if source is not None and not (Path(source[1]) / "policy.zip").exists():
-        commands = _seeded_commands(training_seed)
-        if source[1] not in commands:
-            raise FileNotFoundError(
-                f"{folder} starts from {source[1]}/policy.zip, which is neither here nor "
-                "a run rlfd reproduce knows how to train"
-            )
-        train_run(source[1], commands[source[1]], training_seed)
-    if (Path(folder) / "policy.zip").exists():
-        return
-    program, subcommand, *arguments = shlex.split(command)
-    if (program, subcommand) != ("rlfd", "train"):
-        raise ValueError(f"run {folder}'s command must be 'rlfd train ...', got {command!r}")
-    print(f"training {folder}: {command}", flush=True)
-    argv = [sys.executable, "-m", "rlfd_drake.cli", "train", *arguments]
-    subprocess.run([*argv, "--resume", "--no-progress"], check=True)
+    """Trains the run ``folder`` of RUNS by its ``command`` after the run it starts from
+    (``train_runs`` of this one run)."""
+    train_runs([(folder, command, training_seed)])
 
 
 #: Policies trained by ``rlfd train``: RUNS[key][task] = (run folder, the command that
@@ -1519,13 +1539,14 @@ def _cell(
     metric: str = "success",
     evaluation_episodes: int | None = None,
     training_seed: int = 0,
-    train_missing: bool = False,
+    to_train: list[tuple[str, str, int]] | None = None,
 ) -> tuple[dict, dict | None]:
     """The table cell of ``row`` on ``task`` and the evaluation it reports (None
     when not run); ``evaluation_episodes`` overrides the budget's starts,
-    ``training_seed`` picks a "run:" row's run (``seeded_run``) and ``train_missing``
-    trains a "run:" row's run that has neither its policy here nor a stored evaluation
-    (:func:`train_run`) instead of listing it as not run."""
+    ``training_seed`` picks a "run:" row's run (``seeded_run``) and ``to_train``, if
+    given, collects (folder, command, training seed) of a "run:" row's run that has
+    neither its policy here nor a stored evaluation (to be trained by
+    :func:`train_runs`; the cell is not run until then)."""
     from rlfd_drake.evaluate import NAMED_POLICIES, policy_stem, sampling_suffix
 
     train_episodes, eval_episodes = BUDGETS[budget]
@@ -1591,9 +1612,8 @@ def _cell(
     if result is None and kind == "baseline":
         _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
         result = evaluation(True)
-    if result is None and kind == "run" and train_missing:
-        train_run(folder, command, training_seed)
-        result = evaluation(True)
+    if result is None and kind == "run" and to_train is not None:
+        to_train.append((folder, command, training_seed))
     if result is None:
         return {"status": "not run", "reason": missing}, None
     by_outcome = result.get("forces_by_outcome", {})
@@ -1647,7 +1667,7 @@ def _cell_over_seeds(
     metric: str,
     evaluation_episodes: int | None,
     training_seeds: tuple[int, ...],
-    train_missing: bool = False,
+    to_train: list[tuple[str, str, int]] | None = None,
 ) -> tuple[dict, dict | None]:
     """``_cell`` for each training seed of a "run:" row (other rows: one cell, as they
     are trained once), and, with several seeds, one cell with the mean over the seeds
@@ -1657,7 +1677,7 @@ def _cell_over_seeds(
     if not row.source.startswith("run:"):
         return _cell(row, task, budget, seed, workers, metric, evaluation_episodes)
     per_seed = {
-        s: _cell(row, task, budget, seed, workers, metric, evaluation_episodes, s, train_missing)
+        s: _cell(row, task, budget, seed, workers, metric, evaluation_episodes, s, to_train)
         for s in training_seeds
     }
     if len(training_seeds) == 1:
@@ -1851,27 +1871,16 @@ def _check_training_seeds(training_seeds: tuple[int, ...]) -> tuple[int, ...]:
     return seeds
 
 
-def reproduce_table(
-    number: str,
-    budget: str = "quick",
-    seed: int = 0,
-    workers: int = 2,
-    training_seeds: tuple[int, ...] = (0,),
-    train_missing: bool = False,
-) -> dict:
-    """Measures every runnable cell of table ``number``, "run:" rows over
-    ``training_seeds`` (``_cell_over_seeds``; with ``train_missing`` training the runs
-    that have neither a policy here nor a stored evaluation); writes
-    results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
-    if number not in TABLES:
-        raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
-    if budget not in BUDGETS:
-        raise ValueError(f"budget must be one of {sorted(BUDGETS)}, got {budget!r}")
-    training_seeds = _check_training_seeds(training_seeds)
-    table = TABLES[number]
-    name = table_name(number, training_seeds)
-    print(f"{table.title} (budget {budget})", flush=True)
-    measured = {
+def _measure(
+    table: Table,
+    budget: str,
+    seed: int,
+    workers: int,
+    training_seeds: tuple[int, ...],
+    to_train: list[tuple[str, str, int]] | None = None,
+) -> dict[str, dict[str, tuple[dict, dict | None]]]:
+    """Every cell of ``table``: row label -> column -> (cell, evaluation)."""
+    return {
         row.label: {
             column: _cell_over_seeds(
                 row,
@@ -1882,12 +1891,62 @@ def reproduce_table(
                 table.metric,
                 table.evaluation_episodes,
                 training_seeds,
-                train_missing,
+                to_train,
             )
             for column, task in table.columns.items()
         }
         for row in table.rows
     }
+
+
+def _check_table_arguments(numbers: list[str], budget: str) -> None:
+    for number in numbers:
+        if number not in TABLES:
+            raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
+    if budget not in BUDGETS:
+        raise ValueError(f"budget must be one of {sorted(BUDGETS)}, got {budget!r}")
+
+
+def reproduce_tables(
+    numbers: list[str],
+    budget: str = "quick",
+    seed: int = 0,
+    workers: int = 2,
+    training_seeds: tuple[int, ...] = (0,),
+    train_missing: bool = False,
+    parallel_runs: int = 1,
+) -> list[dict]:
+    """``reproduce_table`` of each of ``numbers``; with ``train_missing``, first the
+    deep-RL runs every one of them lacks (neither a policy here nor a stored evaluation)
+    are trained together, up to ``parallel_runs`` at once (:func:`train_runs`), so runs
+    of different rows, tasks, seeds and tables share the cores."""
+    _check_table_arguments(numbers, budget)
+    training_seeds = _check_training_seeds(training_seeds)
+    check_parallel_runs(parallel_runs)
+    if train_missing:
+        wanted: list[tuple[str, str, int]] = []
+        for number in numbers:
+            _measure(TABLES[number], budget, seed, workers, training_seeds, wanted)
+        train_runs(wanted, parallel_runs)
+    return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
+
+
+def reproduce_table(
+    number: str,
+    budget: str = "quick",
+    seed: int = 0,
+    workers: int = 2,
+    training_seeds: tuple[int, ...] = (0,),
+) -> dict:
+    """Measures every runnable cell of table ``number``, "run:" rows over
+    ``training_seeds`` (``_cell_over_seeds``; ``reproduce_tables`` trains the missing
+    runs first); writes results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
+    _check_table_arguments([number], budget)
+    training_seeds = _check_training_seeds(training_seeds)
+    table = TABLES[number]
+    name = table_name(number, training_seeds)
+    print(f"{table.title} (budget {budget})", flush=True)
+    measured = _measure(table, budget, seed, workers, training_seeds)
     cells = {label: {c: cell for c, (cell, _) in row.items()} for label, row in measured.items()}
     evaluations = {label: {c: r for c, (_, r) in row.items()} for label, row in measured.items()}
     markdown = _markdown(table, cells, budget, seed, training_seeds)

@@ -35,6 +35,8 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     assert "rlfd: error" in capsys.readouterr().err
     assert main(["train", "--task", "peg_huge", "--episodes", "1"]) == 2
     assert "task must be one of" in capsys.readouterr().err
+    assert main(["reproduce", "--table", "6", "--train-missing", "--parallel-runs", "0"]) == 2
+    assert "parallel runs must be an integer >= 1, got 0" in capsys.readouterr().err
     out = tmp_path / "shaped"
     args = ["train", "--distance-shaping", "-1", "--episodes", "1", "--out", str(out)]
     assert main(args) == 2
@@ -263,6 +265,8 @@ def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
 def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert main(["bench", "sim", "--tasks", "peg"]) == 2
     assert "--tasks: only the diagram benchmark takes tasks, not 'sim'" in capsys.readouterr().err
+    assert main(["bench", "dmp", "--queue-episodes", "5"]) == 2
+    assert "only the train-queue benchmark takes them, not 'dmp'" in capsys.readouterr().err
 
 
 def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 import rlfd_drake.reproduce as reproduce
+import rlfd_drake.run_queue as run_queue
 
 
 def _fake_evaluation(
@@ -155,14 +156,14 @@ def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
 def _recording_trainer(monkeypatch, calls):
     """subprocess.run as ``rlfd train`` would leave it: the --out folder gets a policy."""
 
-    def run(argv, check):
-        assert check and argv[:4] == [reproduce.sys.executable, "-m", "rlfd_drake.cli", "train"]
+    def run(argv, check, **output):
+        assert check and argv[:4] == [run_queue.sys.executable, "-m", "rlfd_drake.cli", "train"]
         calls.append(argv)
         out = Path(argv[argv.index("--out") + 1])
         out.mkdir(parents=True, exist_ok=True)
         (out / "policy.zip").write_bytes(b"")
 
-    monkeypatch.setattr(reproduce.subprocess, "run", run)
+    monkeypatch.setattr(run_queue.subprocess, "run", run)
 
 
 @pytest.mark.parametrize("training_seed", [0, 2])
@@ -214,7 +215,7 @@ def test_train_missing_fills_the_rows_that_have_no_policy_and_no_stored_evaluati
         and rows["PPO, incremental: 60 episodes from the source, mean action"]["peg"]["status"]
         == "not run"
     )
-    data = reproduce.reproduce_table("6_peg_gear", train_missing=True)
+    [data] = reproduce.reproduce_tables(["6_peg_gear"], train_missing=True)
     table = reproduce.TABLES["6_peg_gear"]
     keys = {row.source.removeprefix("run:") for row in table.rows if row.source.startswith("run:")}
     for row in data["rows"]:
@@ -225,6 +226,44 @@ def test_train_missing_fills_the_rows_that_have_no_policy_and_no_stored_evaluati
     trained = sorted(argv[argv.index("--out") + 1] for argv in calls)
     expected = {run[0] for key in keys for run in reproduce.RUNS[key].values()}
     assert trained == sorted(expected)
+
+
+def test_tables_trained_together_train_each_missing_run_once_in_parallel(tmp_path, monkeypatch):
+    """Two tables sharing a source run: surveyed first, every missing run (sources
+    included) trained once with two at a time (logs beside the folders), then measured."""
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
+    numbers = ["6_incremental_nopush", "6_peg_gear"]
+    tables = reproduce.reproduce_tables(numbers, train_missing=True, parallel_runs=2)
+    trained = [argv[argv.index("--out") + 1] for argv in calls]
+    assert len(trained) == len(set(trained))
+    keys = {
+        row.source.removeprefix("run:")
+        for number in numbers
+        for row in reproduce.TABLES[number].rows
+        if row.source.startswith("run:")
+    }
+    needed = {
+        run[0]
+        for number in numbers
+        for row in reproduce.TABLES[number].rows
+        if row.source.startswith("run:")
+        for task in reproduce.TABLES[number].columns.values()
+        if task in reproduce.RUNS[row.source.removeprefix("run:")]
+        for run in [reproduce.RUNS[row.source.removeprefix("run:")][task]]
+    }
+    assert needed <= set(trained) <= {run[0] for k in keys for run in reproduce.RUNS[k].values()}
+    for number, data in zip(numbers, tables, strict=True):
+        for row in data["rows"]:
+            if row["source"].startswith("run:"):
+                key = row["source"].removeprefix("run:")
+                for column, cell in row["ours"].items():
+                    task = reproduce.TABLES[number].columns[column]
+                    assert (cell["status"] == "measured") == (task in reproduce.RUNS[key])
+    with pytest.raises(ValueError, match="parallel runs must be an integer >= 1, got 0"):
+        reproduce.reproduce_tables(numbers, train_missing=True, parallel_runs=0)
 
 
 def test_train_run_trains_a_real_run_by_its_command(tmp_path, monkeypatch):
