@@ -422,11 +422,45 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_training_plan(name: str, numbers: list[str], training_seeds: tuple[int, ...]) -> int:
+    """``rlfd reproduce --plan``: the runs the tables rest on, with their recorded training
+    times, printed and written to results/reproduce_plan_<table>[_training_seeds_..].json."""
+    from rlfd_drake.reproduce import table_name, training_plan
+    from rlfd_drake.results import write_result
+
+    plan = training_plan(numbers, training_seeds)
+    print("| run | starts from | policy here | recorded training min | command |")
+    print("|---|---|---|---|---|")
+    for run in plan["runs"]:
+        wall = run["recorded_wall_time_s"]
+        minutes = "no record" if wall is None else f"{wall / 60:.1f}"
+        here = "yes" if run["policy_here"] else "no"
+        print(
+            f"| {run['folder']} | {run['after'] or '-'} | {here} | {minutes} | {run['command']} |"
+        )
+    total = plan["recorded_total_wall_time_s"] / 3600
+    print(
+        f"\n{len(plan['runs'])} runs, {total:.1f} h of recorded training one at a time "
+        f"({plan['runs_without_record']} without a record); rlfd reproduce --train-missing "
+        "trains those with neither a policy here nor a stored evaluation"
+    )
+    path = write_result(
+        f"reproduce_plan_{table_name(name, training_seeds).removeprefix('table_')}", plan
+    )
+    print(f"wrote {path}")
+    return 0
+
+
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     from rlfd_drake.reproduce import reproduce_tables
     from rlfd_drake.run_queue import default_parallel_runs
 
-    numbers = sorted(TABLES) if args.table == "all" else [args.table]
+    if "all" in args.table and len(args.table) > 1:
+        raise ValueError(f"--table: 'all' stands alone, got {args.table}")
+    numbers = sorted(TABLES) if args.table == ["all"] else list(dict.fromkeys(args.table))
+    if args.plan:
+        name = "all" if args.table == ["all"] else "_".join(numbers)
+        return _print_training_plan(name, numbers, tuple(args.training_seeds))
     reproduce_tables(
         numbers,
         budget=args.budget,
@@ -946,7 +980,9 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument(
         "--table",
         choices=[*sorted(TABLES), "all"],
-        default="all",
+        nargs="+",
+        default=["all"],
+        help="one or more tables (trained together with --train-missing), or all",
     )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
     reproduce.add_argument("--seed", type=int, default=0, help="evaluation seed")
@@ -966,6 +1002,13 @@ def build_parser() -> argparse.ArgumentParser:
         "nor a stored evaluation, and what they start from, by their rlfd train commands "
         "(resumed if interrupted; 5-45 min each on 2 cores); without it they are listed "
         "as not run, with the command",
+    )
+    reproduce.add_argument(
+        "--plan",
+        action="store_true",
+        help="measure nothing: list the rlfd train runs the tables rest on (sources first), "
+        "whether each policy is here and its recorded training time -> "
+        "results/reproduce_plan_<table>.json",
     )
     reproduce.add_argument(
         "--parallel-runs",

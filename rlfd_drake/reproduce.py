@@ -78,6 +78,7 @@ __all__ = [
     "stored_or_new_evaluation",
     "train_run",
     "train_runs",
+    "training_plan",
 ]
 
 #: (baseline training episodes, evaluation episodes per task).
@@ -186,21 +187,30 @@ def _seeded_commands(training_seed: int) -> dict[str, str]:
     return dict(seeded_run(run, training_seed) for runs in RUNS.values() for run in runs.values())
 
 
-def _training_jobs(runs: list[tuple[str, str, int]]) -> list[TrainingJob]:
+def _training_jobs(
+    runs: list[tuple[str, str, int]], skip_trained: bool = True
+) -> list[TrainingJob]:
     """The jobs that train ``runs`` ((folder, command, training seed) of RUNS), each
     preceded by the run it starts from (``--init-from <run>/policy.zip``) where that is a
-    RUNS run of the same training seed without its policy yet; a run named twice is
-    trained once. FileNotFoundError names a source that is neither here nor trainable."""
+    RUNS run of the same training seed (with ``skip_trained``, only runs without their
+    policy here, and a source only while it has none); a run named twice is trained
+    once. FileNotFoundError names a source that is neither here nor trainable."""
     jobs: dict[str, TrainingJob] = {}
 
+    def trained(folder: str) -> bool:
+        return skip_trained and (Path(folder) / "policy.zip").exists()
+
     def add(folder: str, command: str, training_seed: int) -> None:
-        if folder in jobs or (Path(folder) / "policy.zip").exists():
+        if folder in jobs or trained(folder):
             return
         source = re.search(r"--init-from (\S+)/policy\.zip", command)
         after = None
-        if source is not None and not (Path(source[1]) / "policy.zip").exists():
+        if source is not None and not trained(source[1]):
             commands = _seeded_commands(training_seed)
             if source[1] not in commands:
+                if (Path(source[1]) / "policy.zip").exists():
+                    jobs[folder] = TrainingJob(folder, command)  # a source of the user's
+                    return
                 raise FileNotFoundError(
                     f"{folder} starts from {source[1]}/policy.zip, which is neither here "
                     "nor a run rlfd reproduce knows how to train"
@@ -213,6 +223,52 @@ def _training_jobs(runs: list[tuple[str, str, int]]) -> list[TrainingJob]:
         _check_training_seed(training_seed)
         add(folder, command, training_seed)
     return list(jobs.values())
+
+
+def _table_runs(numbers: list[str], training_seeds: tuple[int, ...]) -> list[tuple[str, str, int]]:
+    """(folder, command, training seed) of every run the "run:" rows of tables
+    ``numbers`` evaluate, over ``training_seeds``, in table order."""
+    return [
+        (*seeded_run(RUNS[row.source.removeprefix("run:")][task], s), s)
+        for number in numbers
+        for row in TABLES[number].rows
+        if row.source.startswith("run:")
+        for task in TABLES[number].columns.values()
+        if task in RUNS[row.source.removeprefix("run:")]
+        for s in training_seeds
+    ]
+
+
+def training_plan(numbers: list[str], training_seeds: tuple[int, ...] = (0,)) -> dict:
+    """What training tables ``numbers`` rest on: every run their rows evaluate and the
+    runs those start from (sources first), each with its command, whether its policy is
+    here, and the wall time of its recorded training (its run folder's or kept log's
+    metrics.json; None where neither is here), and the recorded total."""
+    _check_table_arguments(numbers)
+    training_seeds = _check_training_seeds(training_seeds)
+    runs = []
+    for job in _training_jobs(_table_runs(numbers, training_seeds), skip_trained=False):
+        metrics = run_log_file(job.folder, "metrics.json")
+        recorded = json.loads(metrics.read_text()) if metrics is not None else {}
+        runs.append(
+            {
+                "folder": job.folder,
+                "command": job.command,
+                "after": job.after,
+                "policy_here": (Path(job.folder) / "policy.zip").exists(),
+                "recorded_wall_time_s": recorded.get("wall_time_s"),
+                "recorded_episodes": recorded.get("episodes"),
+                "recorded_in": str(metrics.parent) if metrics is not None else None,
+            }
+        )
+    times = [run["recorded_wall_time_s"] for run in runs]
+    return {
+        "tables": list(numbers),
+        "training_seeds": list(training_seeds),
+        "runs": runs,
+        "recorded_total_wall_time_s": sum(t for t in times if t is not None),
+        "runs_without_record": sum(t is None for t in times),
+    }
 
 
 def train_runs(runs: list[tuple[str, str, int]], parallel: int = 1) -> None:
@@ -1899,11 +1955,13 @@ def _measure(
     }
 
 
-def _check_table_arguments(numbers: list[str], budget: str) -> None:
+def _check_table_arguments(numbers: list[str], budget: str | None = None) -> None:
+    if not numbers:
+        raise ValueError("tables must name at least one table, got none")
     for number in numbers:
         if number not in TABLES:
             raise ValueError(f"table must be one of {sorted(TABLES)}, got {number!r}")
-    if budget not in BUDGETS:
+    if budget is not None and budget not in BUDGETS:
         raise ValueError(f"budget must be one of {sorted(BUDGETS)}, got {budget!r}")
 
 

@@ -266,6 +266,43 @@ def test_tables_trained_together_train_each_missing_run_once_in_parallel(tmp_pat
         reproduce.reproduce_tables(numbers, train_missing=True, parallel_runs=0)
 
 
+def test_the_training_plan_lists_every_run_a_table_rests_on_with_its_recorded_time(
+    tmp_path, monkeypatch, capsys
+):
+    from rlfd_drake.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    plan = reproduce.training_plan(["6_peg_gear"])
+    folders = [run["folder"] for run in plan["runs"]]
+    expected = {run[0] for run in reproduce._table_runs(["6_peg_gear"], (0,))}
+    assert expected <= set(folders) and len(folders) == len(set(folders))
+    for run in plan["runs"]:
+        if run["after"] is not None:
+            assert folders.index(run["after"]) < folders.index(run["folder"])
+    assert plan["runs_without_record"] == len(folders) and plan["recorded_total_wall_time_s"] == 0
+    # A kept log's training time counts; a policy here is reported as here.
+    first, second = plan["runs"][0]["folder"], plan["runs"][1]["folder"]
+    kept = tmp_path / "results" / f"train_{Path(first).name}"
+    kept.mkdir(parents=True)
+    (kept / "metrics.json").write_text(json.dumps({"wall_time_s": 120.0, "episodes": 700}))
+    (tmp_path / second).mkdir(parents=True)
+    (tmp_path / second / "policy.zip").write_bytes(b"")
+    plan = reproduce.training_plan(["6_peg_gear"])
+    assert plan["runs"][0]["recorded_wall_time_s"] == 120.0
+    assert plan["runs"][0]["recorded_episodes"] == 700
+    assert plan["recorded_total_wall_time_s"] == 120.0
+    assert plan["runs_without_record"] == len(folders) - 1
+    assert [run["policy_here"] for run in plan["runs"]][:2] == [False, True]
+    assert main(["reproduce", "--table", "6_peg_gear", "6_peg_gear", "--plan"]) == 0
+    assert "2.0 |" in capsys.readouterr().out
+    stored = json.loads((tmp_path / "results/reproduce_plan_6_peg_gear.json").read_text())
+    assert stored["data"]["runs"] == plan["runs"]
+    assert main(["reproduce", "--table", "all", "1", "--plan"]) == 2
+    assert "'all' stands alone" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="tables must name at least one table"):
+        reproduce.training_plan([])
+
+
 def test_train_run_trains_a_real_run_by_its_command(tmp_path, monkeypatch):
     """The subprocess is the user's rlfd train: two PPO episodes leave a policy."""
     monkeypatch.chdir(tmp_path)
