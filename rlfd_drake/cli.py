@@ -72,15 +72,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     elif args.what == "train-queue":
         from rlfd_drake.bench import train_queue
 
-        runs = 4 if args.queue_runs is None else args.queue_runs
-        episodes = 10 if args.queue_episodes is None else args.queue_episodes
-        parallel = (1, 2) if args.queue_parallel is None else tuple(args.queue_parallel)
-        data = train_queue.run(
-            repeats=args.repeats, runs=runs, episodes=episodes, parallel=parallel
-        )
-        name = f"bench_train_queue_{runs}x{episodes}"
+        given = {"runs": args.queue_runs, "episodes": args.queue_episodes}
         if args.queue_parallel is not None:
-            name += "_at_once_" + "_".join(str(p) for p in parallel)
+            given["parallel"] = tuple(args.queue_parallel)
+        settings = {key: value for key, value in given.items() if value is not None}
+        data = train_queue.run(repeats=args.repeats, **settings)  # its defaults otherwise
+        name = f"bench_train_queue_{data['runs']}x{data['episodes']}"
+        if args.queue_parallel is not None:
+            name += "_at_once_" + "_".join(data["wall_s"])
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
     path = write_result(name, data)

@@ -196,6 +196,7 @@ def _training_jobs(
     policy here, and a source only while it has none); a run named twice is trained
     once. FileNotFoundError names a source that is neither here nor trainable."""
     jobs: dict[str, TrainingJob] = {}
+    commands_by_seed: dict[int, dict[str, str]] = {}  # built once per seed, not per source
 
     def trained(folder: str) -> bool:
         return skip_trained and (Path(folder) / "policy.zip").exists()
@@ -206,7 +207,9 @@ def _training_jobs(
         source = re.search(r"--init-from (\S+)/policy\.zip", command)
         after = None
         if source is not None and not trained(source[1]):
-            commands = _seeded_commands(training_seed)
+            if training_seed not in commands_by_seed:
+                commands_by_seed[training_seed] = _seeded_commands(training_seed)
+            commands = commands_by_seed[training_seed]
             if source[1] not in commands:
                 if (Path(source[1]) / "policy.zip").exists():
                     jobs[folder] = TrainingJob(folder, command)  # a source of the user's

@@ -24,6 +24,7 @@ from pathlib import Path
 __all__ = [
     "TrainingFailed",
     "TrainingJob",
+    "check_count",
     "check_parallel_runs",
     "default_parallel_runs",
     "train_queue",
@@ -90,10 +91,15 @@ def _log_path(folder: str) -> Path:
     return Path(folder).parent / f"{Path(folder).name}.train.log"
 
 
+def check_count(name: str, value: int) -> None:
+    """ValueError naming ``name`` unless ``value`` is an integer >= 1 (bools refused)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+
 def check_parallel_runs(parallel: int) -> None:
     """ValueError unless ``parallel`` (runs trained at once) is an integer >= 1."""
-    if isinstance(parallel, bool) or not isinstance(parallel, int) or parallel < 1:
-        raise ValueError(f"parallel runs must be an integer >= 1, got {parallel!r}")
+    check_count("parallel runs", parallel)
 
 
 def _check_queue(jobs: list[TrainingJob], parallel: int) -> None:

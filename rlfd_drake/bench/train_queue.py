@@ -18,6 +18,7 @@ from pathlib import Path
 from rlfd_drake.run_queue import (
     ENV_PROCESSES_PER_RUN,
     TrainingJob,
+    check_count,
     default_parallel_runs,
     train_queue,
     usable_cores,
@@ -54,8 +55,7 @@ def run(
         "default_parallel_runs"}``.
     """
     for name, value in (("repeats", repeats), ("runs", runs), ("episodes", episodes)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        check_count(name, value)
     if not parallel or any(
         isinstance(p, bool) or not isinstance(p, int) or p < 1 for p in parallel
     ):
