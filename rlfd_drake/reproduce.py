@@ -21,8 +21,9 @@ of Tables I and II's rows), ``forces_full_pose`` (Table IV's rows), and ``wrist`
 residual action is a rate), ``incremental_nopush`` / ``forces_incremental_nopush`` (the
 same whose residual may not push down), ``incremental_push2mm`` /
 ``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
-``6_wrist_smooth``, ``6_incremental`` and ``6_incremental_nopush`` (Table VI between
-those variants of gear and RJ-45), ``6_peg_gear`` (the same question between peg and
+``6_wrist_smooth``, ``6_incremental``, ``6_incremental_nopush`` and
+``6_phase_stop_nopush`` (Table VI between those variants of gear and RJ-45; the last
+with RJ-45's DMP phase-stopped), ``6_peg_gear`` (the same question between peg and
 gear, whose rate residuals share their action), ``rj45_imitation`` (RJ-45 with PPO
 started from a copy of the force-guided search); 5 and the force tables reuse the other
 tables' evaluations.
@@ -538,6 +539,29 @@ _add_ppo_transfer_runs(
         _TRANSFER_NOPUSH["rj45"]: _run(
             "runs/rj45_slow_insert_incremental_nopush_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
             _TRANSFER_NOPUSH["rj45"],
+            1400,
+            f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
+            "ppo",
+        ),
+    },
+)
+# The same between gear's no-push variant and RJ-45's with the DMP phase-stopped (the
+# variant on which RJ-45's copy recipe meets 75 %), both rate residuals that may not push:
+# results/full_pose_study.md, section 29.
+_TRANSFER_PHASE_STOP = {
+    "gear": _INCREMENTAL_NOPUSH["gear"],
+    "rj45": "models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml",
+}
+_add_ppo_transfer_runs(
+    "_phase_stop_nopush",
+    _TRANSFER_PHASE_STOP,
+    full={
+        _TRANSFER_PHASE_STOP["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][
+            _TRANSFER_PHASE_STOP["gear"]
+        ],
+        _TRANSFER_PHASE_STOP["rj45"]: _run(
+            "runs/rj45_phase_stop_incremental_nopush_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
+            _TRANSFER_PHASE_STOP["rj45"],
             1400,
             f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
             "ppo",
@@ -1279,6 +1303,27 @@ TABLES["6_incremental_nopush"] = _ppo_transfer_table(
     "the source's networks with a new optimiser and read the observation as the source "
     "does. A residual of 1 is 1 cm / 5 deg on gear and 3 mm / 3 deg on RJ-45. The "
     "paper's DMP row is Table IV's; its other columns are its physical robot.",
+)
+
+TABLES["6_phase_stop_nopush"] = _ppo_transfer_table(
+    "Table VI between gear and RJ-45 with the phase-stopped DMP, no-push rate residuals "
+    "(full-pose PPO)",
+    _TRANSFER_PHASE_STOP,
+    "PPO, incremental, no push",
+    "_phase_stop_nopush",
+    "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
+    "rj45_phase_stop_incremental_nopush.yaml (the shipped RJ-45 demonstration with the DMP "
+    "phase-stopped while the controller lags it, a deviation from the paper's open-loop "
+    "DMP): on both the residual action is a rate and its offset may not move the part "
+    "below the DMP's path. Full training is one run of 1,400 episodes with the step size "
+    "falling to zero (section 8's PPO recipe, RJ-45 with its contact-torque scale 0.05 N m "
+    "and force-limit penalty 1); the 60-episode runs keep a constant step (4-5 PPO "
+    "updates), the fine-tunes start from the source's networks with a new optimiser and "
+    "read the observation as the source does. A residual of 1 is 1 cm / 5 deg on gear and "
+    "3 mm / 3 deg on RJ-45. Mean action, 160 test starts (RJ-45's whole grid; evaluation "
+    "seed 0). The paper's DMP row is Table IV's.",
+    sampled=False,
+    evaluation_episodes=160,
 )
 
 # Table VI's question between the two tasks whose best recipes share the residual: peg

@@ -676,42 +676,50 @@ def test_the_incremental_ppo_transfer_rows_fine_tune_the_other_tasks_700_episode
     assert "PPO, incremental: 60 episodes from the source, mean action" in labels
 
 
-def test_the_no_push_transfer_fine_tunes_the_other_tasks_falling_step_size_policy():
-    """Table VI between the no-push variants: full training is one 1,400-episode run with
-    the linear schedule (gear's is the no-push table's row); each 60-episode run keeps the
-    constant step and starts from the other task's full run, reading it as it does."""
+@pytest.mark.parametrize(
+    "suffix, rj45",
+    [
+        ("_incremental_nopush", "rj45_slow_insert_incremental_nopush"),
+        ("_phase_stop_nopush", "rj45_phase_stop_incremental_nopush"),
+    ],
+)
+def test_the_no_push_transfer_fine_tunes_the_other_tasks_falling_step_size_policy(suffix, rj45):
+    """Table VI between the no-push variants (RJ-45's slow or phase-stopped one): full
+    training is one 1,400-episode run with the linear schedule (gear's is the no-push
+    table's row); each 60-episode run keeps the constant step and starts from the other
+    task's full run, reading it as it does."""
     from rlfd_drake.cli import build_parser
 
     runs = reproduce.RUNS
     tasks = {
         "gear": "models/tasks/variants/gear_incremental_nopush.yaml",
-        "rj45": "models/tasks/variants/rj45_slow_insert_incremental_nopush.yaml",
+        "rj45": f"models/tasks/variants/{rj45}.yaml",
     }
     parse = build_parser().parse_args
     assert (
-        runs["ppo_full_incremental_nopush"][tasks["gear"]]
+        runs[f"ppo_full{suffix}"][tasks["gear"]]
         == runs["rlfd_ppo_incremental_nopush_lrlin_1400"][tasks["gear"]]
     )
     for target, source in (("gear", "rj45"), ("rj45", "gear")):
-        full = parse(runs["ppo_full_incremental_nopush"][tasks[target]][1].split()[1:])
-        source_full = parse(runs["ppo_full_incremental_nopush"][tasks[source]][1].split()[1:])
+        full = parse(runs[f"ppo_full{suffix}"][tasks[target]][1].split()[1:])
+        source_full = parse(runs[f"ppo_full{suffix}"][tasks[source]][1].split()[1:])
         assert (full.task, full.episodes, full.learning_rate_schedule) == (
             tasks[target],
             1400,
             "linear",
         )
-        assert runs["ppo_source_as_is_incremental_nopush"][tasks[target]][0] == source_full.out
-        folder, command = runs["ppo_from_source_60_incremental_nopush"][tasks[target]]
+        assert runs[f"ppo_source_as_is{suffix}"][tasks[target]][0] == source_full.out
+        folder, command = runs[f"ppo_from_source_60{suffix}"][tasks[target]]
         fine_tune = parse(command.split()[1:])
         assert (fine_tune.task, fine_tune.episodes, fine_tune.out) == (tasks[target], 60, folder)
         assert fine_tune.init_from == f"{source_full.out}/policy.zip"
         assert fine_tune.learning_rate_schedule == "constant"
         assert fine_tune.contact_torque_nm == source_full.contact_torque_nm
         assert fine_tune.force_limit_penalty == full.force_limit_penalty
-        scratch = parse(runs["ppo_scratch_60_incremental_nopush"][tasks[target]][1].split()[1:])
+        scratch = parse(runs[f"ppo_scratch_60{suffix}"][tasks[target]][1].split()[1:])
         assert (scratch.init_from, scratch.episodes) == (None, 60)
         assert scratch.contact_torque_nm == full.contact_torque_nm
-    labels = [row.label for row in reproduce.TABLES["6_incremental_nopush"].rows]
+    labels = [row.label for row in reproduce.TABLES[f"6{suffix}"].rows]
     assert "PPO, incremental, no push: 60 episodes from the source, mean action" in labels
 
 
