@@ -61,8 +61,11 @@ from pathlib import Path
 
 from rlfd_drake.paths import (
     SHIPPED_FULL_POSE_POLICY,
+    SHIPPED_GEAR_POLICY,
+    SHIPPED_PEG_IMITATION_POLICY,
     SHIPPED_POLICY,
     SHIPPED_PPO_POLICY,
+    SHIPPED_RJ45_IMITATION_POLICY,
     models_dir,
 )
 from rlfd_drake.results import results_dir, spread_over_seeds, write_result
@@ -85,7 +88,14 @@ __all__ = [
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
 #: Training episodes of the shipped policies (models/policies/README.md).
-_SHIPPED_EPISODES = {SHIPPED_POLICY: 700, SHIPPED_FULL_POSE_POLICY: 700, SHIPPED_PPO_POLICY: 700}
+_SHIPPED_EPISODES = {
+    SHIPPED_POLICY: 700,
+    SHIPPED_FULL_POSE_POLICY: 700,
+    SHIPPED_PPO_POLICY: 700,
+    SHIPPED_PEG_IMITATION_POLICY: 700,
+    SHIPPED_GEAR_POLICY: 1400,
+    SHIPPED_RJ45_IMITATION_POLICY: 1400,
+}
 
 
 @dataclass(frozen=True)
@@ -97,6 +107,9 @@ class Row:
         source: a named policy (``evaluate.NAMED_POLICIES``: "dmp", "random",
             "force_search", ...) or a "translation|orientation" split of two (e.g.
             "force_search|slope"), "policy:<file under models/>" (a shipped policy),
+            "shipped:<key of SHIPPED_BY_TASK>" (the shipped policy of the column's
+            task, run on the task it was trained on: the column's or a variant of it
+            that changes only how the residual acts),
             "run:<key of RUNS>" (the policy of the column's task trained by ``rlfd
             train``; not run, with the command to train it, if the folder has no
             policy yet),
@@ -435,6 +448,18 @@ _INCREMENTAL_NOPUSH = {
     task: f"models/tasks/variants/{task}_incremental_nopush.yaml" for task in ("peg", "gear")
 }
 _add_ppo_variant_runs("rlfd_ppo_incremental_nopush", _INCREMENTAL_NOPUSH, second_stage="gear")
+#: Shipped policies by column task: (the task the policy runs on, its file under
+#: models/). "full_pose": each Table IV task's recipe that meets or comes nearest its
+#: success target on the paper's DMP, so that the quick budget has an rLfD row without
+#: training (their commands: models/policies/README.md). Gear's runs on its variant whose
+#: residual is a rate that may not push (the same gear, DMP, starts and errors).
+SHIPPED_BY_TASK: dict[str, dict[str, tuple[str, str]]] = {
+    "full_pose": {
+        "peg": ("peg", SHIPPED_PEG_IMITATION_POLICY),
+        "gear": (_INCREMENTAL_NOPUSH["gear"], SHIPPED_GEAR_POLICY),
+        "rj45": ("rj45", SHIPPED_RJ45_IMITATION_POLICY),
+    }
+}
 # The same recipes in one run whose step size falls linearly to zero over its episodes
 # (peg: 700 pushing, gear: 1,400 not pushing): results/full_pose_study.md, section 15.
 _LINEAR_LR_FLAGS = f"{_PPO_STD2_FLAGS} --learning-rate-schedule linear"
@@ -978,12 +1003,22 @@ TABLES: dict[str, Table] = {
                 stochastic=True,
                 noise_scale=0.5,
             ),
+            Row(
+                "PPO / PPO (rLfD), each task's recipe (shipped policies), mean action",
+                "shipped:full_pose",
+                _PAPER_FULL_POSE_RLFD,
+            ),
             Row("Force-guided search / None (hand-written reference)", "force_search", {}),
         ],
         "Linear is trained on each column's task (Linear / Random: on translation, with "
-        "uniform random rotations added at evaluation). The force-guided search is not in "
-        "the paper: a hand-written translation rule (lift, push away from the centre of "
-        "pressure) that shows what a residual within the task's bounds can reach.",
+        "uniform random rotations added at evaluation). The shipped policies' row is each "
+        "task's recipe nearest its target, evaluated without training (models/policies/: "
+        "peg and RJ-45 PPO from a copy of the search with the slope's turn, 700 / 1,400 "
+        "episodes, peg's with a cost on its peak force; gear PPO with a rate residual that "
+        "may not push, 1,400 episodes, run on that variant of gear). The force-guided "
+        "search is not in the paper: a hand-written translation rule (lift, push away from "
+        "the centre of pressure) that shows what a residual within the task's bounds can "
+        "reach.",
     ),
     "3": Table(
         "Table III: ways to use a nonlinear policy (simulation, trained on easy)",
@@ -1664,6 +1699,13 @@ def _cell(
     elif kind == "policy":
         policy = str(models_dir() / detail)
         label, trained = Path(detail).stem, _SHIPPED_EPISODES.get(detail)
+        missing = f"no policy at {policy}"
+    elif kind == "shipped":
+        if task not in SHIPPED_BY_TASK[detail]:
+            return {"status": "not run", "reason": f"no shipped {detail} policy for {task}"}, None
+        task, file = SHIPPED_BY_TASK[detail][task]  # the task the policy was trained on
+        policy = str(models_dir() / file)
+        label, trained = Path(file).stem, _SHIPPED_EPISODES[file]
         missing = f"no policy at {policy}"
     elif kind == "run":
         if task not in RUNS[detail]:

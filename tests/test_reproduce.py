@@ -9,6 +9,7 @@ import pytest
 
 import rlfd_drake.reproduce as reproduce
 import rlfd_drake.run_queue as run_queue
+from rlfd_drake.paths import models_dir
 
 
 def _fake_evaluation(
@@ -498,6 +499,53 @@ def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch, table, colu
     row = next(r for r in data["rows"] if r["label"].startswith("Force-guided search"))
     assert all(row["ours"][column]["success_pct"] == pytest.approx(70.0) for column in columns)
     assert "not in the paper" in (tmp_path / "results" / f"table_{table}.md").read_text()
+
+
+def test_the_shipped_full_pose_row_runs_each_policy_on_the_task_it_was_trained_on(
+    tmp_path, monkeypatch
+):
+    """Table IV's shipped row: each column's shipped file, evaluated on the task its
+    sidecar names (gear's no-push rate variant, peg and RJ-45 as shipped), under a name
+    of that task and file, with the file's training episodes, and no training."""
+    monkeypatch.chdir(tmp_path)
+    asked = {}
+
+    def recording_evaluation(task, policy, name, *args, **kwargs):
+        asked[name] = (task, policy)
+        return _fake_evaluation(task, policy, name, *args, **kwargs)
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    monkeypatch.setattr(reproduce, "train_runs", lambda *a, **k: pytest.fail("no training"))
+    data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
+    [row] = [r for r in data["rows"] if r["source"] == "shipped:full_pose"]
+    for column, (task, file) in reproduce.SHIPPED_BY_TASK["full_pose"].items():
+        name = f"eval_{Path(task).stem}_{Path(file).stem}_n40_s0"
+        assert asked[name] == (task, str(models_dir() / file))
+        cell = row["ours"][column]
+        assert cell["result_file"] == f"{name}.json"
+        assert cell["training_episodes"] == reproduce._SHIPPED_EPISODES[file]
+    assert reproduce.SHIPPED_BY_TASK["full_pose"]["gear"][0].endswith(
+        "gear_incremental_nopush.yaml"
+    )
+
+
+@pytest.mark.parametrize("column", ["peg", "gear", "rj45"])
+def test_each_shipped_full_pose_policy_was_trained_on_the_task_it_runs_on(column):
+    """The shipped files behind Table IV's shipped row: each sidecar names the task the
+    row evaluates it on and the episodes the table reports, and one episode runs."""
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.policies import training_config_file
+
+    task, file = reproduce.SHIPPED_BY_TASK["full_pose"][column]
+    shipped = models_dir() / file
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert config["task"] == task
+    assert config["episodes"] == reproduce._SHIPPED_EPISODES[file]
+    result = evaluate(task, str(shipped), 1, 0, workers=1, progress=False)
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
 
 
 def test_half_noise_row_and_full_pose_forces(tmp_path, monkeypatch):
