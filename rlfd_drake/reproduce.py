@@ -546,6 +546,29 @@ def _add_ppo_transfer_runs(
 
 
 _add_ppo_transfer_runs("_incremental", _TRANSFER_INCREMENTAL)
+
+
+def _no_push_transfer_runs(suffix: str, variants: dict[str, str]) -> None:
+    """Table VI's runs between gear's no-push variant and an RJ-45 no-push variant
+    (``variants``: task -> path): gear's full training is its 1,400-episode falling-step
+    run, RJ-45's the same recipe with its torque scale and force-limit penalty."""
+    rj45 = variants["rj45"]
+    _add_ppo_transfer_runs(
+        suffix,
+        variants,
+        full={
+            variants["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][variants["gear"]],
+            rj45: _run(
+                f"runs/{Path(rj45).stem}_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
+                rj45,
+                1400,
+                f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
+                "ppo",
+            ),
+        },
+    )
+
+
 # The same between the no-push variants (the DMP does all the pressing on both tasks, so a
 # copied residual brings no push of its own; section 12 found each task's push the other's
 # failure). Full training is section 15's one run of 1,400 episodes with the step size
@@ -554,22 +577,7 @@ _TRANSFER_NOPUSH = {
     "gear": _INCREMENTAL_NOPUSH["gear"],
     "rj45": "models/tasks/variants/rj45_slow_insert_incremental_nopush.yaml",
 }
-_add_ppo_transfer_runs(
-    "_incremental_nopush",
-    _TRANSFER_NOPUSH,
-    full={
-        _TRANSFER_NOPUSH["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][
-            _TRANSFER_NOPUSH["gear"]
-        ],
-        _TRANSFER_NOPUSH["rj45"]: _run(
-            "runs/rj45_slow_insert_incremental_nopush_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
-            _TRANSFER_NOPUSH["rj45"],
-            1400,
-            f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
-            "ppo",
-        ),
-    },
-)
+_no_push_transfer_runs("_incremental_nopush", _TRANSFER_NOPUSH)
 # The same between gear's no-push variant and RJ-45's with the DMP phase-stopped (the
 # variant on which RJ-45's copy recipe meets 75 %), both rate residuals that may not push:
 # results/full_pose_study.md, section 29.
@@ -577,22 +585,7 @@ _TRANSFER_PHASE_STOP = {
     "gear": _INCREMENTAL_NOPUSH["gear"],
     "rj45": "models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml",
 }
-_add_ppo_transfer_runs(
-    "_phase_stop_nopush",
-    _TRANSFER_PHASE_STOP,
-    full={
-        _TRANSFER_PHASE_STOP["gear"]: RUNS["rlfd_ppo_incremental_nopush_lrlin_1400"][
-            _TRANSFER_PHASE_STOP["gear"]
-        ],
-        _TRANSFER_PHASE_STOP["rj45"]: _run(
-            "runs/rj45_phase_stop_incremental_nopush_ppo_std2_so_torque005_pen1_tt_lrlin_e1400_s0",
-            _TRANSFER_PHASE_STOP["rj45"],
-            1400,
-            f"{_LINEAR_LR_FLAGS} {_PPO_STD2_EXTRA['rj45']}",
-            "ppo",
-        ),
-    },
-)
+_no_push_transfer_runs("_phase_stop_nopush", _TRANSFER_PHASE_STOP)
 # RJ-45 from a copy of the force-guided search: PPO's mean fitted to the rule's actions
 # on 200 training episodes (``rlfd train --imitate``), then section 8's RJ-45 recipe for
 # 700 episodes and 700 more from that policy. results/rj45_study.md, last section.
