@@ -22,13 +22,15 @@ import numpy as np
 from rlfd_drake.baselines.force_guided import ForceGuidedSearch
 from rlfd_drake.baselines.orientation_reference import slope_residual
 from rlfd_drake.baselines.split import SplitResidualPolicy
-from rlfd_drake.control_math import keep_residual_part
+from rlfd_drake.control_math import keep_residual_part, rate_toward_offset
+from rlfd_drake.systems.observer import OBSERVATION_RESIDUAL
 from rlfd_drake.tasks import TaskSpec
 
 __all__ = [
     "BASE_CORRECTIONS",
     "BaseCorrectedAction",
     "BaseCorrectedPolicy",
+    "RateTrackingRule",
     "add_base_correction",
     "applied_residual_mode",
     "check_base_correction",
@@ -80,10 +82,40 @@ def check_base_correction(name: str) -> None:
         raise ValueError(f"base_correction must be one of {sorted(BASE_CORRECTIONS)}, got {name!r}")
 
 
-def make_base_correction(name: str, task: TaskSpec | None = None):
+class RateTrackingRule:
+    """An offset rule acting through a rate residual (``residual_rate_per_s``): each
+    policy step it asks for the rate that moves the held offset (the observation's
+    residual input) to the offset the rule names, as fast as the rate allows
+    (:func:`control_math.rate_toward_offset`). It lets a rule teach a rate residual
+    (``rlfd train --imitate`` on a rate task); under a learned rate residual it would
+    pull against the learner, so ``--base-correction`` still refuses rate tasks."""
+
+    def __init__(self, rule, rate_per_s: float, residual_period_s: float):
+        self.rule = rule
+        self.step = float(rate_per_s) * float(residual_period_s)
+        rate_toward_offset(np.zeros(6), np.zeros(6), self.step)  # ValueError on a bad step
+
+    def reset(self) -> None:
+        if hasattr(self.rule, "reset"):
+            self.rule.reset()
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observation, dtype=float).reshape(-1)
+        return rate_toward_offset(self.rule(obs), obs[OBSERVATION_RESIDUAL], self.step)
+
+    def __repr__(self) -> str:
+        return f"RateTrackingRule({self.rule!r}, step={self.step})"
+
+
+def make_base_correction(name: str, task: TaskSpec | None = None, through_rate: bool = False):
     """A new instance of the rule ``name`` on ``task`` (None for rules that do not read
-    it); ValueError naming an unknown rule, or a missing task a rule needs."""
+    it); ValueError naming an unknown rule, or a missing task a rule needs. On a rate
+    residual's task, ``through_rate`` gives the rule as a :class:`RateTrackingRule`
+    (for imitation); without it such a task is refused (:func:`check_offset_rule`)."""
     check_base_correction(name)
+    if through_rate and isinstance(task, TaskSpec) and task.residual_rate_per_s is not None:
+        rule = BASE_CORRECTIONS[name](task)
+        return RateTrackingRule(rule, task.residual_rate_per_s, task.residual_period_s)
     check_offset_rule(name, task)
     return BASE_CORRECTIONS[name](task)
 

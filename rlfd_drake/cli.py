@@ -934,7 +934,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="PPO first copies this hand-written rule (e.g. force_search): its mean fitted "
         "to the rule's actions on the rule's own episodes, then RL; the copy is "
-        "checkpoints/policy_0_steps.zip. Only the network acts at run time",
+        "checkpoints/policy_0_steps.zip. Only the network acts at run time. On a rate "
+        "residual the rule's offsets are reached through the rate",
     )
     train.add_argument(
         "--imitation-episodes", type=int, default=None, help="the rule's episodes (100)"

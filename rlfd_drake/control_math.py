@@ -416,6 +416,18 @@ def integrate_residual(offset: np.ndarray, rate_action: np.ndarray, step: float)
     return np.clip(offset + step * np.clip(rate_action, -1.0, 1.0), -1.0, 1.0)
 
 
+def rate_toward_offset(target: np.ndarray, held: np.ndarray, step: float) -> np.ndarray:
+    """The rate action that moves an incremental residual's ``held`` offset to ``target``
+    in one policy step if it can, else as far as the rate allows: ``clip((target - held)
+    / step, -1, 1)``, ``step = rate_per_s * residual_period_s`` (the offset one action of
+    1 moves in one policy step; :func:`integrate_residual` over the step's ticks)."""
+    if not (np.isfinite(step) and step > 0.0):
+        raise ValueError(f"step must be a positive number, got {step}")
+    target = np.asarray(target, dtype=float)
+    held = np.asarray(held, dtype=float)
+    return np.clip((target - held) / step, -1.0, 1.0)
+
+
 def check_config_numbers(
     config: object,
     positive: tuple[str, ...] = (),

@@ -55,7 +55,9 @@ def collect_teacher_episodes(venv, teacher_name: str, episodes: int, gamma: floa
     """Runs the rule ``teacher_name`` (``base_correction.BASE_CORRECTIONS``) as the
     whole residual in the vectorised training env ``venv`` (its wrappers as the learner
     has them) until ``episodes`` episodes have ended; episodes still running then are
-    dropped. Returns :class:`TeacherEpisodes`.
+    dropped. On a rate residual's task the rule acts through the rate
+    (``base_correction.RateTrackingRule``), so the actions recorded are rates. Returns
+    :class:`TeacherEpisodes`.
 
     Raises:
         ValueError: ``episodes`` < 1, an unknown teacher, or an env whose observation
@@ -67,7 +69,10 @@ def collect_teacher_episodes(venv, teacher_name: str, episodes: int, gamma: floa
         task = venv.get_attr("task", [0])[0]  # a rule may read the task (its table slope)
     except AttributeError:
         task = None
-    teachers = [make_base_correction(teacher_name, task) for _ in range(venv.num_envs)]
+    # On a rate residual the rule's offsets are reached through the rate (RateTrackingRule).
+    teachers = [
+        make_base_correction(teacher_name, task, through_rate=True) for _ in range(venv.num_envs)
+    ]
     if len(venv.observation_space.shape) != 1:
         raise ValueError(
             f"imitation needs a flat observation, the env gives {venv.observation_space.shape}"

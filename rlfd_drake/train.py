@@ -208,8 +208,10 @@ class TrainConfig:
             (``imitation``): its mean is fitted to the rule's actions and its value to
             the returns of ``imitation_episodes`` episodes the rule runs on training
             starts, for ``imitation_epochs`` passes; that policy is saved as the
-            checkpoint at step 0. At run time only the network acts. None = RL from
-            the zero residual (the paper's rLfD).
+            checkpoint at step 0. At run time only the network acts. On a rate
+            residual's task the rule's offsets are reached through the rate
+            (``base_correction.RateTrackingRule``). None = RL from the zero residual
+            (the paper's rLfD).
         imitation_episodes, imitation_epochs: the rule's episodes and the fit's passes.
     """
 

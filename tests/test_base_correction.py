@@ -11,11 +11,14 @@ import pytest
 from rlfd_drake.base_correction import (
     BaseCorrectedAction,
     BaseCorrectedPolicy,
+    RateTrackingRule,
     add_base_correction,
     make_base_correction,
 )
 from rlfd_drake.baselines.force_guided import ForceGuidedSearch
+from rlfd_drake.control_math import integrate_residual, rate_toward_offset
 from rlfd_drake.systems.observer import (
+    OBSERVATION_RESIDUAL,
     OBSERVATION_SIZE,
     OBSERVATION_WRIST_FORCE,
     OBSERVATION_WRIST_TORQUE,
@@ -117,6 +120,36 @@ def test_an_offset_rule_is_refused_on_a_rate_residual(rule):
     if rule != "force_search_and_slope":
         with pytest.raises(ValueError, match=pattern):
             make_policy(f"dmp|{rule}", "full", 0, task=task)
+
+
+def test_rate_toward_offset_reaches_a_near_target_in_one_step_and_a_far_one_at_full_rate():
+    held = np.zeros(6)
+    target = np.array([0.1, -0.1, 0.0, 0.5, -1.0, 0.2])
+    rate = rate_toward_offset(target, held, 0.2)
+    np.testing.assert_allclose(rate, [0.5, -0.5, 0.0, 1.0, -1.0, 1.0])
+    np.testing.assert_allclose(integrate_residual(held, rate, 0.2)[0:3], target[0:3])
+    with pytest.raises(ValueError, match="step must be a positive number, got 0.0"):
+        rate_toward_offset(target, held, 0.0)
+
+
+@pytest.mark.parametrize("rule", ["force_search", "force_search_and_slope", "slope"])
+def test_a_rule_taught_through_a_rate_brings_the_held_offset_to_the_rules_offset(rule):
+    """On a rate task (rj45_phase_stop_incremental_nopush: 2 /s, 0.1 s steps) the tracked
+    rule, closed around the integrator, holds the offset the rule names after
+    ceil(1 / 0.2) = 5 steps at most, and stays there (a rate of zero)."""
+    from rlfd_drake.tasks import load_task
+
+    task = load_task("models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml")
+    tracked = make_base_correction(rule, task, through_rate=True)
+    assert isinstance(tracked, RateTrackingRule) and tracked.step == pytest.approx(0.2)
+    target = tracked.rule(_pressed_observation())
+    obs = _pressed_observation()
+    for _ in range(5):
+        obs[OBSERVATION_RESIDUAL] = integrate_residual(obs[OBSERVATION_RESIDUAL], tracked(obs), 0.2)
+    np.testing.assert_allclose(obs[OBSERVATION_RESIDUAL], target, atol=1e-12)
+    np.testing.assert_allclose(tracked(obs), 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match="gives a residual offset"):
+        make_base_correction(rule, task)  # not as a base under a learned rate
 
 
 def test_training_env_applies_the_rule_on_the_observation_the_agent_saw():

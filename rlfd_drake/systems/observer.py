@@ -18,6 +18,8 @@ OBSERVATION_SIZE = 26
 #: Where the wrist wrench sits in the observation (see :class:`Observer`).
 OBSERVATION_WRIST_TORQUE = slice(12, 15)
 OBSERVATION_WRIST_FORCE = slice(15, 18)
+#: Where the residual input (the last held action, or a rate residual's held offset) sits.
+OBSERVATION_RESIDUAL = slice(20, 26)
 # Force-metric state layout.
 _PEAK_F, _SUM_F, _COUNT, _PEAK_TAU, _SUCCESS, _FILTERED_F, _PEAK_FILTERED_F = range(7)
 
@@ -227,7 +229,7 @@ class Observer(LeafSystem):
         obs[:18] = raw * self._obs_scale
         obs[18] = self._phase.Eval(context)[0]
         obs[19] = context.get_time() / self.config.episode_time_s
-        obs[20:26] = self._residual.Eval(context)
+        obs[OBSERVATION_RESIDUAL] = self._residual.Eval(context)
 
     def _calc_reward(self, context: Context, output: BasicVector) -> None:
         output.SetAtIndex(0, 1.0 if self.DistanceToGoal(context) <= self.config.kappa_m else 0.0)
