@@ -23,7 +23,8 @@ same whose residual may not push down), ``incremental_push2mm`` /
 ``forces_incremental_push2mm`` (peg's whose residual may push at most 2 mm),
 ``6_wrist_smooth``, ``6_incremental``, ``6_incremental_nopush`` and
 ``6_phase_stop_nopush`` (Table VI between those variants of gear and RJ-45; the last
-with RJ-45's DMP phase-stopped), ``6_peg_gear`` (the same question between peg and
+with RJ-45's DMP phase-stopped), ``6_phase_stop_nopush_imitation`` (the same with RJ-45's
+rate residual started from a copy of the search), ``6_peg_gear`` (the same question between peg and
 gear, whose rate residuals share their action), ``rj45_imitation`` (RJ-45 with PPO
 started from a copy of the force-guided search); 5 and the force tables reuse the other
 tables' evaluations.
@@ -515,12 +516,18 @@ _TRANSFER_INCREMENTAL = {
 
 
 def _add_ppo_transfer_runs(
-    suffix: str, variants: dict[str, str], full: dict[str, tuple[str, str]] | None = None
+    suffix: str,
+    variants: dict[str, str],
+    full: dict[str, tuple[str, str]] | None = None,
+    source_tags: dict[str, str] | None = None,
 ) -> None:
     """RUNS["ppo_full" + suffix] (``full``, path -> run; default: section 8's recipe for
     700 episodes on each of ``variants``' two tasks, task -> path), ["ppo_source_as_is"
     + suffix], ["ppo_scratch_60" + suffix] and ["ppo_from_source_60" + suffix]: Table
-    VI's PPO rows between them (the paper's pair is gear and rj45)."""
+    VI's PPO rows between them (the paper's pair is gear and rj45). ``source_tags``
+    (source task -> tag) names a fine-tune's source run beyond its task's stem, where
+    another table fine-tunes from another run on the same task."""
+    source_tags = source_tags or {}
     if full is None:
         full = {path: _ppo_std2_run(path, task, 700) for task, path in variants.items()}
     RUNS[f"ppo_full{suffix}"] = full
@@ -538,7 +545,7 @@ def _add_ppo_transfer_runs(
             variants[target],
             target,
             60,
-            f"_from_{Path(variants[source]).stem}",
+            f"_from_{Path(variants[source]).stem}{source_tags.get(source, '')}",
             (source, full[variants[source]][0]),
         )
         for target, source in pairs
@@ -652,6 +659,30 @@ RUNS["ppo_imitate_fs_slope_lrlin_1400"] = {
     )
     for task in ("rj45", _RJ45_FAST_RESIDUAL, _RJ45_PHASE_STOP)
 }
+# Table VI between the same no-push variants as "_phase_stop_nopush", RJ-45's full
+# training now started from a copy of the search with the slope's turn taught through
+# the rate (base_correction.RateTrackingRule), then 700 PPO episodes: RJ-45's rate
+# residual learned nothing from zero (section 29), so its policy had no skill to carry.
+# Gear's side, the scratch runs and RJ-45 from gear are section 29's runs.
+# results/full_pose_study.md, section 30.
+_add_ppo_transfer_runs(
+    "_phase_stop_nopush_imitation",
+    _TRANSFER_PHASE_STOP,
+    full={
+        _TRANSFER_PHASE_STOP["gear"]: RUNS["ppo_full_phase_stop_nopush"][
+            _TRANSFER_PHASE_STOP["gear"]
+        ],
+        _TRANSFER_PHASE_STOP["rj45"]: _run(
+            f"runs/{Path(_TRANSFER_PHASE_STOP['rj45']).stem}"
+            "_ppo_std2_imitate_fsslope_torque005_pen1_tt_lrlin_e700_s0",
+            _TRANSFER_PHASE_STOP["rj45"],
+            700,
+            _SLOPE_TEACHER_FLAGS,
+            "ppo",
+        ),
+    },
+    source_tags={"rj45": "_imitate"},
+)
 # The same recipe on peg (section 8's peg flags, 700 episodes): results/full_pose_study.md,
 # section 24.
 _PEG_SLOPE_TEACHER_FLAGS = (
@@ -1350,6 +1381,24 @@ TABLES["6_phase_stop_nopush"] = _ppo_transfer_table(
     "read the observation as the source does. A residual of 1 is 1 cm / 5 deg on gear and "
     "3 mm / 3 deg on RJ-45. Mean action, 160 test starts (RJ-45's whole grid; evaluation "
     "seed 0). The paper's DMP row is Table IV's.",
+    sampled=False,
+    evaluation_episodes=160,
+)
+
+TABLES["6_phase_stop_nopush_imitation"] = _ppo_transfer_table(
+    "Table VI between gear and RJ-45 with the phase-stopped DMP, no-push rate residuals, "
+    "RJ-45's started from a copy of the search (full-pose PPO)",
+    _TRANSFER_PHASE_STOP,
+    "PPO, incremental, no push",
+    "_phase_stop_nopush_imitation",
+    "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
+    "rj45_phase_stop_incremental_nopush.yaml as in 6_phase_stop_nopush, except RJ-45's full "
+    "training: PPO's mean first fitted to the force-guided search with the table slope's "
+    "turn on 200 training episodes, the rule acting through the rate (each step the rate "
+    "that brings the held offset to the rule's offset; rlfd train --imitate), then 700 "
+    "episodes with the step size falling to zero. Gear's full training (1,400 episodes "
+    "from zero), both 60-episode runs from scratch and RJ-45 from gear's policy are "
+    "6_phase_stop_nopush's runs. Mean action, 160 test starts (evaluation seed 0).",
     sampled=False,
     evaluation_episodes=160,
 )

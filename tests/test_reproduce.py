@@ -771,6 +771,29 @@ def test_the_no_push_transfer_fine_tunes_the_other_tasks_falling_step_size_polic
     assert "PPO, incremental, no push: 60 episodes from the source, mean action" in labels
 
 
+def test_the_imitation_transfer_changes_only_rj45s_full_run_and_the_fine_tune_from_it():
+    """6_phase_stop_nopush_imitation: RJ-45's full run copies the search and slope (through
+    the rate) before 700 falling-step episodes; gear's fine-tune starts from it under a
+    folder of its own; every other run is 6_phase_stop_nopush's."""
+    from rlfd_drake.cli import build_parser
+
+    runs, new, old = reproduce.RUNS, "_phase_stop_nopush_imitation", "_phase_stop_nopush"
+    gear = "models/tasks/variants/gear_incremental_nopush.yaml"
+    rj45 = "models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml"
+    parse = build_parser().parse_args
+    full = parse(runs[f"ppo_full{new}"][rj45][1].split()[1:])
+    assert (full.task, full.episodes, full.learning_rate_schedule) == (rj45, 700, "linear")
+    assert (full.imitate, full.imitation_episodes) == ("force_search_and_slope", 200)
+    assert runs[f"ppo_full{new}"][gear] == runs[f"ppo_full{old}"][gear]
+    assert runs[f"ppo_source_as_is{new}"][gear][0] == full.out
+    folder, command = runs[f"ppo_from_source_60{new}"][gear]
+    assert folder != runs[f"ppo_from_source_60{old}"][gear][0]
+    assert parse(command.split()[1:]).init_from == f"{full.out}/policy.zip"
+    assert runs[f"ppo_from_source_60{new}"][rj45] == runs[f"ppo_from_source_60{old}"][rj45]
+    for task in (gear, rj45):
+        assert runs[f"ppo_scratch_60{new}"][task] == runs[f"ppo_scratch_60{old}"][task]
+
+
 def test_the_peg_gear_transfer_fine_tunes_each_tasks_best_rate_policy_reading_as_it_does():
     """Table VI between peg and gear: full training is each task's falling-step run (peg
     700 episodes, gear 1,400 without push); the 60-episode runs keep the constant step,
