@@ -520,26 +520,36 @@ def test_the_shipped_full_pose_row_runs_each_policy_on_the_task_it_was_trained_o
     )
     monkeypatch.setattr(reproduce, "train_runs", lambda *a, **k: pytest.fail("no training"))
     data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
-    [row] = [r for r in data["rows"] if r["source"] == "shipped:full_pose"]
-    for column, (task, file) in reproduce.SHIPPED_BY_TASK["full_pose"].items():
-        name = f"eval_{Path(task).stem}_{Path(file).stem}_n40_s0"
-        assert asked[name] == (task, str(models_dir() / file))
-        cell = row["ours"][column]
-        assert cell["result_file"] == f"{name}.json"
-        assert cell["training_episodes"] == reproduce._SHIPPED_EPISODES[file]
+    for key in ("full_pose", "full_pose_phase_stop"):
+        [row] = [r for r in data["rows"] if r["source"] == f"shipped:{key}"]
+        for column, (task, file) in reproduce.SHIPPED_BY_TASK[key].items():
+            name = f"eval_{Path(task).stem}_{Path(file).stem}_n40_s0"
+            assert asked[name] == (task, str(models_dir() / file))
+            cell = row["ours"][column]
+            assert cell["result_file"] == f"{name}.json"
+            assert cell["training_episodes"] == reproduce._SHIPPED_EPISODES[file]
     assert reproduce.SHIPPED_BY_TASK["full_pose"]["gear"][0].endswith(
         "gear_incremental_nopush.yaml"
     )
+    shipped = reproduce.SHIPPED_BY_TASK
+    assert shipped["full_pose_phase_stop"]["rj45"][0].endswith("rj45_phase_stop.yaml")
+    assert {k: v for k, v in shipped["full_pose_phase_stop"].items() if k != "rj45"} == {
+        k: v for k, v in shipped["full_pose"].items() if k != "rj45"
+    }
 
 
-@pytest.mark.parametrize("column", ["peg", "gear", "rj45"])
-def test_each_shipped_full_pose_policy_was_trained_on_the_task_it_runs_on(column):
+@pytest.mark.parametrize(
+    "key, column",
+    [("full_pose", "peg"), ("full_pose", "gear"), ("full_pose", "rj45")]
+    + [("full_pose_phase_stop", "rj45")],
+)
+def test_each_shipped_full_pose_policy_was_trained_on_the_task_it_runs_on(key, column):
     """The shipped files behind Table IV's shipped row: each sidecar names the task the
     row evaluates it on and the episodes the table reports, and one episode runs."""
     from rlfd_drake.evaluate import evaluate
     from rlfd_drake.policies import training_config_file
 
-    task, file = reproduce.SHIPPED_BY_TASK["full_pose"][column]
+    task, file = reproduce.SHIPPED_BY_TASK[key][column]
     shipped = models_dir() / file
     config = json.loads(training_config_file(shipped).read_text())["config"]
     assert config["task"] == task
