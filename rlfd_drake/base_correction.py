@@ -64,11 +64,16 @@ BASE_CORRECTIONS: dict[str, Callable[[TaskSpec | None], Callable[[np.ndarray], n
 }
 
 
+def _integrates_a_rate(task: TaskSpec | None) -> bool:
+    """Whether ``task``'s residual action is a rate (``residual_rate_per_s``)."""
+    return isinstance(task, TaskSpec) and task.residual_rate_per_s is not None
+
+
 def check_offset_rule(name: str, task: TaskSpec | None) -> None:
     """ValueError unless ``task``'s residual is an offset: the hand-written rules name
     the offset they want, and on a rate residual (``residual_rate_per_s``) the same
     action would be integrated into a drift to the range's end."""
-    if isinstance(task, TaskSpec) and task.residual_rate_per_s is not None:
+    if _integrates_a_rate(task):
         raise ValueError(
             f"the rule {name!r} gives a residual offset, but task {task.name!r} integrates "
             f"its residual as a rate (residual_rate_per_s={task.residual_rate_per_s}); "
@@ -113,7 +118,7 @@ def make_base_correction(name: str, task: TaskSpec | None = None, through_rate: 
     residual's task, ``through_rate`` gives the rule as a :class:`RateTrackingRule`
     (for imitation); without it such a task is refused (:func:`check_offset_rule`)."""
     check_base_correction(name)
-    if through_rate and isinstance(task, TaskSpec) and task.residual_rate_per_s is not None:
+    if through_rate and _integrates_a_rate(task):
         rule = BASE_CORRECTIONS[name](task)
         return RateTrackingRule(rule, task.residual_rate_per_s, task.residual_period_s)
     check_offset_rule(name, task)
