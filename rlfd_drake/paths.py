@@ -28,6 +28,10 @@ SHIPPED_RJ45_IMITATION_POLICY = "policies/rj45_ppo_imitate_slope.zip"
 #: The same recipe run on rj45_phase_stop (the DMP phase-stopped while the controller lags
 #: it, a deviation), where it meets RJ-45's 75 % target (results/rj45_study.md).
 SHIPPED_RJ45_PHASE_STOP_POLICY = "policies/rj45_phase_stop_ppo_imitate_slope.zip"
+#: A rate residual that may not push, on rj45_phase_stop_incremental_nopush (PPO from a
+#: copy of the search taught through the rate): RJ-45's 75 % with the DMP's peak, on test
+#: and fresh starts (results/full_pose_study.md 30, models/policies/README.md).
+SHIPPED_RJ45_PHASE_STOP_RATE_POLICY = "policies/rj45_phase_stop_nopush_ppo_imitate.zip"
 
 
 def models_dir() -> Path:

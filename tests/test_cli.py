@@ -232,6 +232,30 @@ def test_the_shipped_peg_copy_policy_records_its_teacher_and_cost_and_runs_on_pe
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
 
 
+def test_the_shipped_rj45_rate_policy_records_its_rate_teacher_and_runs_on_its_task():
+    """models/policies/rj45_phase_stop_nopush_ppo_imitate.zip (results/full_pose_study.md,
+    section 30): PPO from a copy of the search taught through the rate on RJ-45's
+    phase-stopped no-push rate variant; its sidecar says so, and the network runs alone
+    there with the rate residual's observation (the held offset is part of it)."""
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.paths import SHIPPED_RJ45_PHASE_STOP_RATE_POLICY, models_dir
+    from rlfd_drake.policies import load_sb3_model, training_config_file
+
+    shipped = models_dir() / SHIPPED_RJ45_PHASE_STOP_RATE_POLICY
+    _, kind = load_sb3_model(shipped)
+    assert kind == "ppo"
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert config["task"].endswith("rj45_phase_stop_incremental_nopush.yaml")
+    assert (config["imitate"], config["seed"], config["episodes"]) == (
+        "force_search_and_slope",
+        1,
+        700,
+    )
+    assert config["base_correction"] is None
+    result = evaluate(config["task"], str(shipped), 1, 0, workers=1, progress=False)
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
+
+
 def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     """rlfd plot: the stored evaluations, one panel per task, without running anything."""
     from PIL import Image
