@@ -24,7 +24,8 @@ same whose residual may not push down), ``incremental_push2mm`` /
 ``6_wrist_smooth``, ``6_incremental``, ``6_incremental_nopush`` and
 ``6_phase_stop_nopush`` (Table VI between those variants of gear and RJ-45; the last
 with RJ-45's DMP phase-stopped), ``6_phase_stop_nopush_imitation`` (the same with RJ-45's
-rate residual started from a copy of the search), ``6_peg_gear`` (the same question between peg and
+rate residual started from a copy of the search), ``6_shipped`` (that pair from the shipped
+policies: only its 60-episode runs train), ``6_peg_gear`` (the same question between peg and
 gear, whose rate residuals share their action), ``rj45_imitation`` (RJ-45 with PPO
 started from a copy of the force-guided search); 5 and the force tables reuse the other
 tables' evaluations.
@@ -68,6 +69,7 @@ from rlfd_drake.paths import (
     SHIPPED_PPO_POLICY,
     SHIPPED_RJ45_IMITATION_POLICY,
     SHIPPED_RJ45_PHASE_STOP_POLICY,
+    SHIPPED_RJ45_PHASE_STOP_RATE_POLICY,
     models_dir,
 )
 from rlfd_drake.results import results_dir, spread_over_seeds, write_result
@@ -98,6 +100,7 @@ _SHIPPED_EPISODES = {
     SHIPPED_GEAR_POLICY: 2100,
     SHIPPED_RJ45_IMITATION_POLICY: 1400,
     SHIPPED_RJ45_PHASE_STOP_POLICY: 1400,
+    SHIPPED_RJ45_PHASE_STOP_RATE_POLICY: 700,
 }
 
 
@@ -110,9 +113,10 @@ class Row:
         source: a named policy (``evaluate.NAMED_POLICIES``: "dmp", "random",
             "force_search", ...) or a "translation|orientation" split of two (e.g.
             "force_search|slope"), "policy:<file under models/>" (a shipped policy),
-            "shipped:<key of SHIPPED_BY_TASK>" (the shipped policy of the column's
-            task, run on the task it was trained on: the column's or a variant of it
-            that changes only how the residual acts),
+            "shipped:<key of SHIPPED_BY_TASK>" (a shipped policy per column and the
+            task it runs on: mostly the column task's own, on the task it was trained
+            on, the column's or a variant of it that changes only how the residual
+            acts; Table VI's "as is" row runs the other task's on the column's),
             "run:<key of RUNS>" (the policy of the column's task trained by ``rlfd
             train``; not run, with the command to train it, if the folder has no
             policy yet),
@@ -388,19 +392,22 @@ def _ppo_std2_run(
     """Section 8's PPO recipe for ``task`` ("peg", "gear" or "rj45") on ``path`` (the
     task or a variant): ``episodes`` episodes into
     runs/<path's stem>_ppo_std2_<recipe tag><tag>_e<episodes>_s0. With ``source`` (the
-    other task's name and the run folder of its policy) the run starts from that policy
+    other task's name and the run folder of its policy, or a policy file: a shipped
+    one, models/policies/*.zip) the run starts from that policy
     and reads the observation as it does: with RJ-45's torque scale exactly when the
     source is RJ-45's (the scale is in the copied networks;
     ``train.copy_policy_parameters`` refuses another). The recipe tag then says so:
     gear from RJ-45 "so_torque005_tt", RJ-45 from gear "so_pen1_tt"."""
     flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
     if source is not None:
-        source_task, source_folder = source
+        source_task, source_policy = source
+        if not source_policy.endswith(".zip"):
+            source_policy = f"{source_policy}/policy.zip"
         flags = flags.replace(_RJ45_TORQUE_FLAG, "")
         reads_torque = source_task == "rj45"
         if reads_torque:
             flags += f" {_RJ45_TORQUE_FLAG}"
-        flags += f" --init-from {source_folder}/policy.zip"
+        flags += f" --init-from {source_policy}"
         penalty = "_pen1" if "--force-limit-penalty" in flags else ""
         recipe_tag = f"so{'_torque005' if reads_torque else ''}{penalty}_tt"
     folder = f"runs/{Path(path).stem}_ppo_std2_{recipe_tag}{tag}_e{episodes}_s0"
@@ -595,6 +602,28 @@ _TRANSFER_PHASE_STOP = {
     "rj45": "models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml",
 }
 _no_push_transfer_runs("_phase_stop_nopush", _TRANSFER_PHASE_STOP)
+# Table VI from the shipped policies of that pair (no full training, so the quick budget
+# has Table VI): each task's shipped rate residual as full training, the other task's as
+# is, and 60 episodes from it; 60 from scratch are the runs above.
+_SHIPPED_RATE_FILES = {"gear": SHIPPED_GEAR_POLICY, "rj45": SHIPPED_RJ45_PHASE_STOP_RATE_POLICY}
+_OTHER_TASK = {"gear": "rj45", "rj45": "gear"}
+SHIPPED_BY_TASK["rate_nopush"] = {
+    path: (path, _SHIPPED_RATE_FILES[task]) for task, path in _TRANSFER_PHASE_STOP.items()
+}
+SHIPPED_BY_TASK["rate_nopush_other_task"] = {
+    path: (path, _SHIPPED_RATE_FILES[_OTHER_TASK[task]])
+    for task, path in _TRANSFER_PHASE_STOP.items()
+}
+RUNS["ppo_from_shipped_60_phase_stop_nopush"] = {
+    path: _ppo_std2_run(
+        path,
+        task,
+        60,
+        f"_from_shipped_{Path(_SHIPPED_RATE_FILES[_OTHER_TASK[task]]).stem}",
+        (_OTHER_TASK[task], f"models/{_SHIPPED_RATE_FILES[_OTHER_TASK[task]]}"),
+    )
+    for task, path in _TRANSFER_PHASE_STOP.items()
+}
 # RJ-45 from a copy of the force-guided search: PPO's mean fitted to the rule's actions
 # on 200 training episodes (``rlfd train --imitate``), then section 8's RJ-45 recipe for
 # 700 episodes and 700 more from that policy. results/rj45_study.md, last section.
@@ -848,8 +877,17 @@ def _trained_episodes(run: Path) -> int | None:
     init_from = config.get("init_from") if config else None
     if episodes is None or init_from is None:
         return episodes
-    earlier = _trained_episodes(Path(init_from).parent)
+    earlier = _episodes_before(init_from)
     return None if earlier is None else episodes + earlier
+
+
+def _episodes_before(init_from: str) -> int | None:
+    """The training episodes behind the policy a run started from: a shipped file's
+    (models/policies/*.zip) or its run's."""
+    shipped = init_from.removeprefix("models/")
+    if shipped in _SHIPPED_EPISODES:
+        return _SHIPPED_EPISODES[shipped]
+    return _trained_episodes(Path(init_from).parent)
 
 
 def _checkpoint_episodes(run: Path, checkpoint: str) -> int | None:
@@ -864,7 +902,7 @@ def _checkpoint_episodes(run: Path, checkpoint: str) -> int | None:
     if config is None:
         return None
     init_from = config.get("init_from")
-    return 0 if init_from is None else _trained_episodes(Path(init_from).parent)
+    return 0 if init_from is None else _episodes_before(init_from)
 
 
 def _mean_and_sampled(
@@ -1418,6 +1456,45 @@ TABLES["6_phase_stop_nopush_imitation"] = _ppo_transfer_table(
     "6_phase_stop_nopush's runs. Mean action, 160 test starts (evaluation seed 0).",
     sampled=False,
     evaluation_episodes=160,
+)
+
+# Table VI from the shipped rate residuals: nothing long to train, so any budget has it.
+_SHIPPED_LABEL = "PPO, incremental, no push"
+TABLES["6_shipped"] = Table(
+    "Table VI between gear and RJ-45 from the shipped policies (phase-stopped RJ-45, "
+    "no-push rate residuals, full-pose PPO)",
+    dict(_TRANSFER_PHASE_STOP),
+    [
+        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
+        Row(
+            f"{_SHIPPED_LABEL}: full training on the target (the shipped policy)",
+            "shipped:rate_nopush",
+            {"gear": 92.2, "rj45": 70.6},
+        ),
+        Row(
+            f"{_SHIPPED_LABEL}: source policy as is (the other task's shipped policy)",
+            "shipped:rate_nopush_other_task",
+            {"gear": 85.4, "rj45": 54.5},
+        ),
+        Row(
+            f"{_SHIPPED_LABEL}: 60 episodes from scratch",
+            "run:ppo_scratch_60_phase_stop_nopush",
+            {"gear": 70.3, "rj45": 59.1},
+        ),
+        Row(
+            f"{_SHIPPED_LABEL}: 60 episodes from the source (the other task's shipped policy)",
+            "run:ppo_from_shipped_60_phase_stop_nopush",
+            {"gear": 92.0, "rj45": 70.6},
+        ),
+    ],
+    "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
+    "rj45_phase_stop_incremental_nopush.yaml (6_phase_stop_nopush_imitation's pair) with "
+    "the shipped policies as full training (models/policies/README.md: gear 2,100 "
+    "episodes from zero, RJ-45 a copy of the force-guided search taught through the rate, "
+    "then 700 episodes), so only the 60-episode runs train (rlfd reproduce --train-missing: "
+    "a few minutes each). The fine-tunes start from the other task's shipped file with a "
+    "new optimiser and read the observation as it does; 60 from scratch are "
+    "6_phase_stop_nopush's runs. Mean action.",
 )
 
 # Table VI's question between the two tasks whose best recipes share the residual: peg

@@ -804,6 +804,51 @@ def test_the_imitation_transfer_changes_only_rj45s_full_run_and_the_fine_tune_fr
         assert runs[f"ppo_scratch_60{new}"][task] == runs[f"ppo_scratch_60{old}"][task]
 
 
+def test_the_shipped_transfer_table_trains_only_its_60_episode_runs(tmp_path, monkeypatch):
+    """6_shipped: full training is each task's shipped rate residual, "as is" the other
+    task's shipped file on the column's task; only the 60-episode runs train: from
+    scratch (6_phase_stop_nopush's) and from the other task's shipped file, reading the
+    observation as that file does, with no source run trained first, and a fine-tune's
+    training episodes count the shipped file's."""
+    from rlfd_drake.cli import build_parser
+
+    monkeypatch.chdir(tmp_path)
+    runs, shipped = reproduce.RUNS, reproduce.SHIPPED_BY_TASK
+    gear = "models/tasks/variants/gear_incremental_nopush.yaml"
+    rj45 = "models/tasks/variants/rj45_phase_stop_incremental_nopush.yaml"
+    files = {task: shipped["rate_nopush"][task][1] for task in (gear, rj45)}
+    assert files == {
+        gear: reproduce.SHIPPED_GEAR_POLICY,
+        rj45: "policies/rj45_phase_stop_nopush_ppo_imitate.zip",
+    }
+    assert shipped["rate_nopush_other_task"] == {
+        gear: (gear, files[rj45]),
+        rj45: (rj45, files[gear]),
+    }
+    parse = build_parser().parse_args
+    for target, source in ((gear, rj45), (rj45, gear)):
+        args = parse(runs["ppo_from_shipped_60_phase_stop_nopush"][target][1].split()[1:])
+        assert (args.task, args.episodes, args.init_from) == (target, 60, f"models/{files[source]}")
+        assert args.contact_torque_nm == (0.05 if source == rj45 else None)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
+    [data] = reproduce.reproduce_tables(["6_shipped"], train_missing=True)
+    trained = sorted(argv[argv.index("--out") + 1] for argv in calls)
+    fine_tunes = runs["ppo_from_shipped_60_phase_stop_nopush"]
+    scratch = runs["ppo_scratch_60_phase_stop_nopush"]
+    assert trained == sorted(run[0] for run in [*fine_tunes.values(), *scratch.values()])
+    assert all(
+        cell["status"] == "measured" for row in data["rows"] for cell in row["ours"].values()
+    )
+    folder = Path(fine_tunes[rj45][0])
+    (folder / "config.json").write_text(
+        json.dumps({"config": {"init_from": f"models/{files[gear]}"}})
+    )
+    (folder / "metrics.json").write_text(json.dumps({"episodes": 60}))
+    assert reproduce._trained_episodes(folder) == 60 + reproduce._SHIPPED_EPISODES[files[gear]]
+
+
 def test_the_peg_gear_transfer_fine_tunes_each_tasks_best_rate_policy_reading_as_it_does():
     """Table VI between peg and gear: full training is each task's falling-step run (peg
     700 episodes, gear 1,400 without push); the 60-episode runs keep the constant step,
