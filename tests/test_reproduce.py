@@ -520,7 +520,7 @@ def test_the_shipped_full_pose_row_runs_each_policy_on_the_task_it_was_trained_o
     )
     monkeypatch.setattr(reproduce, "train_runs", lambda *a, **k: pytest.fail("no training"))
     data = reproduce.reproduce_table("4", budget="quick", seed=0, workers=1)
-    for key in ("full_pose", "full_pose_phase_stop"):
+    for key in ("full_pose", "full_pose_phase_stop", "both_targets"):
         [row] = [r for r in data["rows"] if r["source"] == f"shipped:{key}"]
         for column, (task, file) in reproduce.SHIPPED_BY_TASK[key].items():
             name = f"eval_{Path(task).stem}_{Path(file).stem}_n40_s0"
@@ -541,18 +541,22 @@ def test_the_shipped_full_pose_row_runs_each_policy_on_the_task_it_was_trained_o
 @pytest.mark.parametrize(
     "key, column",
     [("full_pose", "peg"), ("full_pose", "gear"), ("full_pose", "rj45")]
-    + [("full_pose_phase_stop", "rj45")],
+    + [("full_pose_phase_stop", "rj45")]
+    + [("both_targets", column) for column in reproduce.SHIPPED_BY_TASK["both_targets"]],
 )
 def test_each_shipped_full_pose_policy_was_trained_on_the_task_it_runs_on(key, column):
-    """The shipped files behind Table IV's shipped row: each sidecar names the task the
-    row evaluates it on and the episodes the table reports, and one episode runs."""
+    """The shipped files behind Table IV's shipped rows: each sidecar names the task the
+    row evaluates it on (peg's wide-error file: its training-only variant of that task)
+    and the episodes the table reports, and one episode runs."""
     from rlfd_drake.evaluate import evaluate
     from rlfd_drake.policies import training_config_file
 
     task, file = reproduce.SHIPPED_BY_TASK[key][column]
     shipped = models_dir() / file
     config = json.loads(training_config_file(shipped).read_text())["config"]
-    assert config["task"] == task
+    wide_error = "models/tasks/variants/peg_incremental_wide_error.yaml"
+    trained_on = {reproduce.SHIPPED_PEG_INCREMENTAL_POLICY: wide_error}
+    assert config["task"] == trained_on.get(file, task)
     assert config["episodes"] == reproduce._SHIPPED_EPISODES[file]
     result = evaluate(task, str(shipped), 1, 0, workers=1, progress=False)
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
