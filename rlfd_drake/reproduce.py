@@ -176,6 +176,15 @@ _SAC_GS4_RECIPE = f"{_SAC_PEG_RECIPE} --sac-gradient-steps 4"
 _RJ45_RECIPE = "--log-std-init -2.5"
 #: The paper's full-pose rLfD (PPO / PPO, Table IV), beside each of our rLfD rows.
 _PAPER_FULL_POSE_RLFD = {"peg": 97.9, "gear": 92.2, "rj45": 70.6}
+#: The paper's DMP alone (Table IV's None / None).
+_PAPER_DMP = {"peg": 52.6, "gear": 41.5, "rj45": 0.0}
+#: Table VI's rows in the paper: (what, its success % per column).
+_PAPER_TRANSFER = (
+    ("full training on the target", {"gear": 92.2, "rj45": 70.6}),
+    ("source policy as is", {"gear": 85.4, "rj45": 54.5}),
+    ("60 episodes from scratch", {"gear": 70.3, "rj45": 59.1}),
+    ("60 episodes from the source", {"gear": 92.0, "rj45": 70.6}),
+)
 
 
 def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sac"):
@@ -611,12 +620,12 @@ _no_push_transfer_runs("_phase_stop_nopush", _TRANSFER_PHASE_STOP)
 # is, and 60 episodes from it; 60 from scratch are the runs above.
 _SHIPPED_RATE_FILES = {"gear": SHIPPED_GEAR_POLICY, "rj45": SHIPPED_RJ45_PHASE_STOP_RATE_POLICY}
 _OTHER_TASK = {"gear": "rj45", "rj45": "gear"}
+_OTHER_RATE_FILE = {task: _SHIPPED_RATE_FILES[other] for task, other in _OTHER_TASK.items()}
 SHIPPED_BY_TASK["rate_nopush"] = {
     path: (path, _SHIPPED_RATE_FILES[task]) for task, path in _TRANSFER_PHASE_STOP.items()
 }
 SHIPPED_BY_TASK["rate_nopush_other_task"] = {
-    path: (path, _SHIPPED_RATE_FILES[_OTHER_TASK[task]])
-    for task, path in _TRANSFER_PHASE_STOP.items()
+    path: (path, _OTHER_RATE_FILE[task]) for task, path in _TRANSFER_PHASE_STOP.items()
 }
 # "both_targets": per task, the shipped file that meets both its success target and the
 # DMP's peak force on test and fresh starts (models/policies/README.md): peg's trained on
@@ -632,8 +641,8 @@ RUNS["ppo_from_shipped_60_phase_stop_nopush"] = {
         path,
         task,
         60,
-        f"_from_shipped_{Path(_SHIPPED_RATE_FILES[_OTHER_TASK[task]]).stem}",
-        (_OTHER_TASK[task], f"models/{_SHIPPED_RATE_FILES[_OTHER_TASK[task]]}"),
+        f"_from_shipped_{Path(_OTHER_RATE_FILE[task]).stem}",
+        (_OTHER_TASK[task], f"models/{_OTHER_RATE_FILE[task]}"),
     )
     for task, path in _TRANSFER_PHASE_STOP.items()
 }
@@ -948,15 +957,17 @@ def _transfer_rows(
     RJ-45 figures."""
     rows = [
         row
-        for what, key, paper in (
-            ("full training on the target", full_runs, (92.2, 70.6)),
-            ("source policy as is", f"{algo}_source_as_is{suffix}", (85.4, 54.5)),
-            ("60 episodes from scratch", f"{algo}_scratch_60{suffix}", (70.3, 59.1)),
-            ("60 episodes from the source", f"{algo}_from_source_60{suffix}", (92.0, 70.6)),
+        for (what, paper), key in zip(
+            _PAPER_TRANSFER,
+            (
+                full_runs,
+                f"{algo}_source_as_is{suffix}",
+                f"{algo}_scratch_60{suffix}",
+                f"{algo}_from_source_60{suffix}",
+            ),
+            strict=True,
         )
-        for row in _mean_and_sampled(
-            f"{label}: {what}", f"run:{key}", dict(zip(("gear", "rj45"), paper, strict=True))
-        )
+        for row in _mean_and_sampled(f"{label}: {what}", f"run:{key}", paper)
     ]
     return rows if sampled else [row for row in rows if not row.stochastic]
 
@@ -1041,7 +1052,7 @@ TABLES: dict[str, Table] = {
         "Table IV: full pose (translation policy / orientation policy)",
         _PHYSICAL,
         [
-            Row("None / None", "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
+            Row("None / None", "dmp", _PAPER_DMP),
             Row(
                 "Linear / None",
                 "baseline:linear",
@@ -1228,7 +1239,7 @@ def _add_variant_tables(
     sampled, on task variants given by path) and TABLES["forces_" + name] (the same
     rows' forces)."""
     rows = [
-        Row(dmp_label, "dmp", {"peg": 52.6, "gear": 41.5, "rj45": 0.0}),
+        Row(dmp_label, "dmp", _PAPER_DMP),
         *(
             row
             for label, run_key in trained
@@ -1394,13 +1405,12 @@ def _ppo_transfer_table(
     :func:`_add_ppo_transfer_runs` named with ``suffix``; with ``sampled`` also their
     sampled actions) under the paper's DMP row (Table IV's figures), then
     ``extra_rows``."""
-    paper_dmp = {"gear": 41.5, "rj45": 0.0, "peg": 52.6}
     rows = _transfer_rows(label, f"ppo_full{suffix}", suffix, "ppo", sampled)
     return Table(
         title,
         dict(variants),
         [
-            Row("DMP alone", "dmp", {column: paper_dmp[column] for column in variants}),
+            Row("DMP alone", "dmp", {column: _PAPER_DMP[column] for column in variants}),
             *rows,
             *extra_rows,
         ],
@@ -1483,31 +1493,26 @@ TABLES["6_phase_stop_nopush_imitation"] = _ppo_transfer_table(
 
 # Table VI from the shipped rate residuals: nothing long to train, so any budget has it.
 _SHIPPED_LABEL = "PPO, incremental, no push"
+_OTHER_FILE = " (the other task's shipped policy)"
 TABLES["6_shipped"] = Table(
     "Table VI between gear and RJ-45 from the shipped policies (phase-stopped RJ-45, "
     "no-push rate residuals, full-pose PPO)",
     dict(_TRANSFER_PHASE_STOP),
     [
-        Row("DMP alone", "dmp", {"gear": 41.5, "rj45": 0.0}),
-        Row(
-            f"{_SHIPPED_LABEL}: full training on the target (the shipped policy)",
-            "shipped:rate_nopush",
-            {"gear": 92.2, "rj45": 70.6},
-        ),
-        Row(
-            f"{_SHIPPED_LABEL}: source policy as is (the other task's shipped policy)",
-            "shipped:rate_nopush_other_task",
-            {"gear": 85.4, "rj45": 54.5},
-        ),
-        Row(
-            f"{_SHIPPED_LABEL}: 60 episodes from scratch",
-            "run:ppo_scratch_60_phase_stop_nopush",
-            {"gear": 70.3, "rj45": 59.1},
-        ),
-        Row(
-            f"{_SHIPPED_LABEL}: 60 episodes from the source (the other task's shipped policy)",
-            "run:ppo_from_shipped_60_phase_stop_nopush",
-            {"gear": 92.0, "rj45": 70.6},
+        Row("DMP alone", "dmp", {column: _PAPER_DMP[column] for column in ("gear", "rj45")}),
+        *(
+            Row(f"{_SHIPPED_LABEL}: {what}{detail}", source, paper)
+            for (what, paper), detail, source in zip(
+                _PAPER_TRANSFER,
+                (" (the shipped policy)", _OTHER_FILE, "", _OTHER_FILE),
+                (
+                    "shipped:rate_nopush",
+                    "shipped:rate_nopush_other_task",
+                    "run:ppo_scratch_60_phase_stop_nopush",
+                    "run:ppo_from_shipped_60_phase_stop_nopush",
+                ),
+                strict=True,
+            )
         ),
     ],
     "Table VI's PPO rows between models/tasks/variants/gear_incremental_nopush.yaml and "
