@@ -221,7 +221,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 from rlfd_drake.paths import SHIPPED_POLICY  # noqa: E402  (re-exported for notebooks)
-from rlfd_drake.reproduce import TABLES  # noqa: E402  (light: numpy only; --table choices)
+from rlfd_drake.reproduce import (  # noqa: E402  (light: numpy only; --table choices)
+    PAPER_TABLES,
+    QUICK_RUN_EPISODES,
+    TABLES,
+)
 from rlfd_drake.run_queue import TrainingFailed  # noqa: E402  (light: standard library only)
 
 
@@ -428,20 +432,26 @@ def _print_training_plan(name: str, numbers: list[str], training_seeds: tuple[in
     from rlfd_drake.results import write_result
 
     plan = training_plan(numbers, training_seeds)
-    print("| run | starts from | policy here | recorded training min | command |")
-    print("|---|---|---|---|---|")
+    print(
+        "| run | starts from | policy here | quick budget trains | recorded training min ", end=""
+    )
+    print("| command |")
+    print("|---|---|---|---|---|---|")
+    yes_no = {True: "yes", False: "no"}
     for run in plan["runs"]:
         wall = run["recorded_wall_time_s"]
         minutes = "no record" if wall is None else f"{wall / 60:.1f}"
-        here = "yes" if run["policy_here"] else "no"
         print(
-            f"| {run['folder']} | {run['after'] or '-'} | {here} | {minutes} | {run['command']} |"
+            f"| {run['folder']} | {run['after'] or '-'} | {yes_no[run['policy_here']]} "
+            f"| {yes_no[run['quick_budget_trains']]} | {minutes} | {run['command']} |"
         )
     total = plan["recorded_total_wall_time_s"] / 3600
+    quick = sum(run["quick_budget_trains"] for run in plan["runs"])
     print(
         f"\n{len(plan['runs'])} runs, {total:.1f} h of recorded training one at a time "
-        f"({plan['runs_without_record']} without a record); rlfd reproduce --train-missing "
-        "trains those with neither a policy here nor a stored evaluation"
+        f"({plan['runs_without_record']} without a record); of those with neither a policy "
+        f"here nor a stored evaluation, rlfd reproduce --train-missing trains every one, "
+        f"the quick budget without it the {quick} short ones"
     )
     path = write_result(
         f"reproduce_plan_{table_name(name, training_seeds).removeprefix('table_')}", plan
@@ -454,11 +464,14 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     from rlfd_drake.reproduce import reproduce_tables
     from rlfd_drake.run_queue import default_parallel_runs
 
-    if "all" in args.table and len(args.table) > 1:
-        raise ValueError(f"--table: 'all' stands alone, got {args.table}")
-    numbers = sorted(TABLES) if args.table == ["all"] else list(dict.fromkeys(args.table))
+    groups = {"all": sorted(TABLES), "paper": list(PAPER_TABLES)}
+    for group in groups:
+        if group in args.table and len(args.table) > 1:
+            raise ValueError(f"--table: {group!r} stands alone, got {args.table}")
+    grouped = args.table[0] in groups
+    numbers = groups[args.table[0]] if grouped else list(dict.fromkeys(args.table))
     if args.plan:
-        name = "all" if args.table == ["all"] else "_".join(numbers)
+        name = args.table[0] if grouped else "_".join(numbers)
         return _print_training_plan(name, numbers, tuple(args.training_seeds))
     reproduce_tables(
         numbers,
@@ -979,10 +992,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reproduce.add_argument(
         "--table",
-        choices=[*sorted(TABLES), "all"],
+        choices=[*sorted(TABLES), "all", "paper"],
         nargs="+",
-        default=["all"],
-        help="one or more tables (trained together with --train-missing), or all",
+        default=["paper"],
+        help="one or more tables (their missing runs trained together), or a group: paper "
+        f"(the default: {' '.join(PAPER_TABLES)}) or all (every table, the studies' too)",
     )
     reproduce.add_argument("--budget", choices=["quick", "paper"], default="quick")
     reproduce.add_argument("--seed", type=int, default=0, help="evaluation seed")
@@ -1000,8 +1014,9 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="train the deep-RL runs (RUNS) a row needs that have neither a policy in runs/ "
         "nor a stored evaluation, and what they start from, by their rlfd train commands "
-        "(resumed if interrupted; 5-45 min each on 2 cores); without it they are listed "
-        "as not run, with the command",
+        "(resumed if interrupted; 5-45 min each on 2 cores); without it the quick budget "
+        f"trains only those of at most {QUICK_RUN_EPISODES} episodes (sources included) "
+        "and lists the others as not run, with the command",
     )
     reproduce.add_argument(
         "--plan",
@@ -1014,7 +1029,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--parallel-runs",
         type=int,
         default=None,
-        help="with --train-missing, runs trained at once (each in its own subprocess, its "
+        help="runs trained at once (each in its own subprocess, its "
         "output in runs/<run>.train.log when more than one; a fine-tune after its source); "
         "default: one per core this process may use (measured fastest: rlfd bench train-queue)",
     )

@@ -80,6 +80,8 @@ from rlfd_drake.run_queue import TrainingJob, check_parallel_runs, train_queue
 
 __all__ = [
     "BUDGETS",
+    "PAPER_TABLES",
+    "QUICK_RUN_EPISODES",
     "TABLES",
     "Row",
     "reproduce_table",
@@ -93,6 +95,13 @@ __all__ = [
 
 #: (baseline training episodes, evaluation episodes per task).
 BUDGETS = {"quick": (100, 40), "paper": (500, 200)}
+#: The quick budget trains a missing ``rlfd train`` run itself when the run and every
+#: missing run it starts from train at most this many episodes (Table III's pure and
+#: hybrid SAC, Table VI's 60-episode runs); longer ones need ``--train-missing``.
+QUICK_RUN_EPISODES = 200
+#: The paper's tables, and Table VI from the shipped policies (its paper rows rest on
+#: hours of training), which ``rlfd reproduce`` measures by default.
+PAPER_TABLES = ("1", "2", "3", "4", "5", "6", "forces", "6_shipped")
 #: Training episodes of the shipped policies (models/policies/README.md).
 _SHIPPED_EPISODES = {
     SHIPPED_POLICY: 700,
@@ -280,11 +289,15 @@ def training_plan(numbers: list[str], training_seeds: tuple[int, ...] = (0,)) ->
     """What training tables ``numbers`` rest on: every run their rows evaluate and the
     runs those start from (sources first), each with its command, whether its policy is
     here, and the wall time of its recorded training (its run folder's or kept log's
-    metrics.json; None where neither is here), and the recorded total."""
+    metrics.json; None where neither is here), whether the quick budget trains it when
+    missing (it and every run it starts from train at most ``QUICK_RUN_EPISODES``
+    episodes), and the recorded total."""
     _check_table_arguments(numbers)
     training_seeds = _check_training_seeds(training_seeds)
     runs = []
-    for job in _training_jobs(_table_runs(numbers, training_seeds), skip_trained=False):
+    jobs = _training_jobs(_table_runs(numbers, training_seeds), skip_trained=False)
+    quick = {job.folder for job in _short_jobs(jobs, QUICK_RUN_EPISODES)}
+    for job in jobs:
         metrics = run_log_file(job.folder, "metrics.json")
         recorded = json.loads(metrics.read_text()) if metrics is not None else {}
         runs.append(
@@ -293,6 +306,7 @@ def training_plan(numbers: list[str], training_seeds: tuple[int, ...] = (0,)) ->
                 "command": job.command,
                 "after": job.after,
                 "policy_here": (Path(job.folder) / "policy.zip").exists(),
+                "quick_budget_trains": job.folder in quick,
                 "recorded_wall_time_s": recorded.get("wall_time_s"),
                 "recorded_episodes": recorded.get("episodes"),
                 "recorded_in": str(metrics.parent) if metrics is not None else None,
@@ -306,6 +320,24 @@ def training_plan(numbers: list[str], training_seeds: tuple[int, ...] = (0,)) ->
         "recorded_total_wall_time_s": sum(t for t in times if t is not None),
         "runs_without_record": sum(t is None for t in times),
     }
+
+
+def command_episodes(command: str) -> int:
+    """The episodes an ``rlfd train`` command trains: ``--episodes`` plus any
+    ``--imitation-episodes`` of the teacher before them."""
+    return sum(int(n) for n in re.findall(r"--(?:imitation-)?episodes (\d+)", command))
+
+
+def _short_jobs(jobs: list[TrainingJob], most_episodes: int) -> list[TrainingJob]:
+    """The jobs of ``jobs`` (sources before the runs that start from them, as
+    ``_training_jobs`` orders them) that train at most ``most_episodes`` episodes and
+    start from no job that trains more."""
+    short: dict[str, bool] = {}
+    for job in jobs:
+        short[job.folder] = command_episodes(job.command) <= most_episodes and (
+            job.after is None or short.get(job.after, False)
+        )
+    return [job for job in jobs if short[job.folder]]
 
 
 def train_runs(runs: list[tuple[str, str, int]], parallel: int = 1) -> None:
@@ -2228,18 +2260,21 @@ def reproduce_tables(
     train_missing: bool = False,
     parallel_runs: int = 1,
 ) -> list[dict]:
-    """``reproduce_table`` of each of ``numbers``; with ``train_missing``, first the
-    deep-RL runs every one of them lacks (neither a policy here nor a stored evaluation)
-    are trained together, up to ``parallel_runs`` at once (:func:`train_runs`), so runs
-    of different rows, tasks, seeds and tables share the cores."""
+    """``reproduce_table`` of each of ``numbers``, after training the deep-RL runs they
+    lack (neither a policy here nor a stored evaluation) together, up to
+    ``parallel_runs`` at once (:func:`train_runs`), so runs of different rows, tasks,
+    seeds and tables share the cores: with ``train_missing`` every such run; otherwise,
+    on the quick budget, those of at most ``QUICK_RUN_EPISODES`` episodes whose sources
+    are here or as short (the others stay "not run", with their command)."""
     _check_table_arguments(numbers, budget)
     training_seeds = _check_training_seeds(training_seeds)
     check_parallel_runs(parallel_runs)
-    if train_missing:
+    if train_missing or budget == "quick":
         wanted: list[tuple[str, str, int]] = []
         for number in numbers:
             _measure(TABLES[number], budget, seed, workers, training_seeds, wanted)
-        train_runs(wanted, parallel_runs)
+        jobs = _training_jobs(wanted)
+        train_queue(jobs if train_missing else _short_jobs(jobs, QUICK_RUN_EPISODES), parallel_runs)
     return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
 
 
