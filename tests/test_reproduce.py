@@ -267,6 +267,66 @@ def test_tables_trained_together_train_each_missing_run_once_in_parallel(tmp_pat
         reproduce.reproduce_tables(numbers, train_missing=True, parallel_runs=0)
 
 
+def _trained_folders(calls) -> list[str]:
+    return sorted(argv[argv.index("--out") + 1] for argv in calls)
+
+
+def test_the_quick_budget_trains_the_short_missing_runs_and_lists_the_long_ones(
+    tmp_path, monkeypatch
+):
+    """Without --train-missing the quick budget trains a missing run of at most
+    QUICK_RUN_EPISODES episodes whose source is here or as short (6_peg_gear: both
+    60-episode runs from scratch; a fine-tune of a 700-episode source only once that
+    source's policy is here); the paper budget trains nothing it is not asked to."""
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", _fake_evaluation)
+    peg = "models/tasks/variants/peg_incremental.yaml"
+    gear = "models/tasks/variants/gear_incremental_nopush.yaml"
+    runs = reproduce.RUNS
+    reproduce.reproduce_tables(["6_peg_gear"], budget="paper")
+    assert calls == []
+    [data] = reproduce.reproduce_tables(["6_peg_gear"])
+    scratch = sorted(run[0] for run in runs["ppo_scratch_60_peg_gear"].values())
+    assert _trained_folders(calls) == scratch and len(scratch) == 2
+    status = {
+        (row["label"], column): cell["status"]
+        for row in data["rows"]
+        for column, cell in row["ours"].items()
+    }
+    assert status[("PPO, incremental: 60 episodes from scratch, mean action", "peg")] == "measured"
+    assert (
+        status[("PPO, incremental: full training on the target, mean action", "peg")] == "not run"
+    )
+    # The peg policy the gear fine-tune starts from is here now: that 60-episode run trains.
+    source = Path(runs["ppo_full_peg_gear"][peg][0])
+    source.mkdir(parents=True)
+    (source / "policy.zip").write_bytes(b"")
+    calls.clear()
+    reproduce.reproduce_tables(["6_peg_gear"])
+    assert _trained_folders(calls) == [runs["ppo_from_source_60_peg_gear"][gear][0]]
+    calls.clear()
+    reproduce.reproduce_tables(["6_peg_gear"])  # nothing missing is short any more
+    assert calls == []
+
+
+def test_a_commands_episodes_count_its_teachers_and_short_jobs_need_short_sources():
+    command = "rlfd train --task peg --episodes 700 --imitate force_search --imitation-episodes 200"
+    assert reproduce.command_episodes(command) == 900
+    assert reproduce.command_episodes("rlfd train --task peg --episodes 60") == 60
+    jobs = [
+        run_queue.TrainingJob("runs/long", "rlfd train --episodes 700 --out runs/long"),
+        run_queue.TrainingJob("runs/after_long", "rlfd train --episodes 60", "runs/long"),
+        run_queue.TrainingJob("runs/short", "rlfd train --episodes 200 --out runs/short"),
+        run_queue.TrainingJob("runs/after_short", "rlfd train --episodes 60", "runs/short"),
+        run_queue.TrainingJob("runs/after_after", "rlfd train --episodes 60", "runs/after_long"),
+    ]
+    short = reproduce._short_jobs(jobs, 200)
+    assert [job.folder for job in short] == ["runs/short", "runs/after_short"]
+    assert reproduce._short_jobs(jobs, 199) == []
+
+
 def test_the_training_plan_lists_every_run_a_table_rests_on_with_its_recorded_time(
     tmp_path, monkeypatch, capsys
 ):
@@ -300,6 +360,21 @@ def test_the_training_plan_lists_every_run_a_table_rests_on_with_its_recorded_ti
     assert stored["data"]["runs"] == plan["runs"]
     assert main(["reproduce", "--table", "all", "1", "--plan"]) == 2
     assert "'all' stands alone" in capsys.readouterr().err
+    assert main(["reproduce", "--table", "paper", "1", "--plan"]) == 2
+    assert "'paper' stands alone" in capsys.readouterr().err
+    # The default is the paper's tables; the plan says which runs the quick budget trains.
+    assert main(["reproduce", "--plan"]) == 0
+    assert "the quick budget without it the 10 short ones" in capsys.readouterr().out
+    paper = json.loads((tmp_path / "results/reproduce_plan_paper.json").read_text())["data"]
+    assert paper["tables"] == list(reproduce.PAPER_TABLES)
+    quick = {run["folder"] for run in paper["runs"] if run["quick_budget_trains"]}
+    assert quick == {
+        run["folder"]
+        for run in paper["runs"]
+        if reproduce.command_episodes(run["command"]) <= reproduce.QUICK_RUN_EPISODES
+        and (run["after"] is None or run["after"] in quick)
+    }
+    assert "runs/peg_easy_sac_pure_e200_s0" in quick and "runs/peg_ppo_s0" not in quick
     with pytest.raises(ValueError, match="tables must name at least one table"):
         reproduce.training_plan([])
 
