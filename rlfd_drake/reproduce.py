@@ -76,7 +76,7 @@ from rlfd_drake.paths import (
 )
 from rlfd_drake.results import results_dir, spread_over_seeds, write_result
 from rlfd_drake.run_log import run_log_file
-from rlfd_drake.run_queue import TrainingJob, check_parallel_runs, train_queue
+from rlfd_drake.run_queue import TrainingJob, check_count, check_parallel_runs, train_queue
 
 __all__ = [
     "BUDGETS",
@@ -2241,7 +2241,13 @@ def _measure(
     }
 
 
-def _check_table_arguments(numbers: list[str], budget: str | None = None) -> None:
+def _check_table_arguments(
+    numbers: list[str], budget: str | None = None, seed: int = 0, workers: int = 1
+) -> None:
+    """ValueError naming the first bad argument, before anything trains or evaluates."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed (the evaluation seed) must be an integer >= 0, got {seed!r}")
+    check_count("workers", workers)
     if not numbers:
         raise ValueError("tables must name at least one table, got none")
     for number in numbers:
@@ -2266,7 +2272,7 @@ def reproduce_tables(
     seeds and tables share the cores: with ``train_missing`` every such run; otherwise,
     on the quick budget, those of at most ``QUICK_RUN_EPISODES`` episodes whose sources
     are here or as short (the others stay "not run", with their command)."""
-    _check_table_arguments(numbers, budget)
+    _check_table_arguments(numbers, budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
     check_parallel_runs(parallel_runs)
     if train_missing or budget == "quick":
@@ -2288,7 +2294,7 @@ def reproduce_table(
     """Measures every runnable cell of table ``number``, "run:" rows over
     ``training_seeds`` (``_cell_over_seeds``; ``reproduce_tables`` trains the missing
     runs first); writes results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
-    _check_table_arguments([number], budget)
+    _check_table_arguments([number], budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
     table = TABLES[number]
     name = table_name(number, training_seeds)

@@ -1220,3 +1220,31 @@ def test_a_table_over_training_seeds_reports_the_seeds_mean_and_spread(tmp_path,
 def test_reproduce_refuses_bad_training_seeds(seeds):
     with pytest.raises(ValueError, match="training_seed"):
         reproduce.reproduce_table("incremental", training_seeds=seeds)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"seed": -1}, "seed \\(the evaluation seed\\) must be an integer >= 0, got -1"),
+        ({"seed": True}, "seed \\(the evaluation seed\\) must be an integer >= 0, got True"),
+        ({"workers": 0}, "workers must be an integer >= 1, got 0"),
+        ({"budget": "slow"}, "budget must be one of \\['paper', 'quick'\\], got 'slow'"),
+    ],
+)
+def test_reproduce_refuses_a_bad_argument_before_it_trains_or_evaluates(
+    tmp_path, monkeypatch, arguments, message
+):
+    """Checked up front, so a quick budget never trains its short runs first and then
+    fails in an evaluation's worker pool."""
+    monkeypatch.chdir(tmp_path)
+    calls = []
+    _recording_trainer(monkeypatch, calls)
+
+    def evaluation(*args, **kwargs):
+        raise AssertionError("evaluated despite a bad argument")
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", evaluation)
+    for measure in (reproduce.reproduce_tables, reproduce.reproduce_table):
+        with pytest.raises(ValueError, match=message):
+            measure(["3"] if measure is reproduce.reproduce_tables else "3", **arguments)
+    assert calls == [] and not (tmp_path / "results").exists()
