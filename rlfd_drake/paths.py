@@ -44,6 +44,18 @@ def models_dir() -> Path:
     return Path(str(resources.files("rlfd_drake.models")))
 
 
+def shipped_path(path: str | Path) -> Path:
+    """``path`` as given where it exists; a relative ``models/...`` path that does not
+    exist from here (RUNS' ``--task models/tasks/variants/...``, README commands: written
+    from the checkout's root) read from the installed package's models folder instead, so
+    they run from any folder; otherwise as given, for the caller's error to name."""
+    path = Path(path)
+    if path.exists() or path.is_absolute() or path.parts[:1] != ("models",):
+        return path
+    installed = models_dir().joinpath(*path.parts[1:])
+    return installed if installed.exists() else path
+
+
 def model_path(relative: str) -> Path:
     """Absolute path of a shipped model file; ValueError if it does not exist."""
     path = models_dir() / relative

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rlfd_drake.control_math import RESIDUAL_MODES, RESIDUAL_PARTS, pad_residual_part
+from rlfd_drake.paths import shipped_path
 
 #: Algorithm name -> (module, class) of its SB3 implementation.
 SB3_CLASSES = {
@@ -54,9 +55,10 @@ def _sb3_kind_from_zip(path: Path) -> str | None:
 
 
 def policy_file(spec: str | Path) -> Path:
-    """The file of a saved-model spec ``path`` or ``kind:path`` (kind in SB3_CLASSES)."""
+    """The file of a saved-model spec ``path`` or ``kind:path`` (kind in SB3_CLASSES);
+    a ``models/...`` path not found here is the installed package's (``shipped_path``)."""
     kind, _, rest = str(spec).partition(":")
-    return Path(rest) if rest and kind in SB3_CLASSES else Path(spec)
+    return shipped_path(rest if rest and kind in SB3_CLASSES else spec)
 
 
 def load_sb3_model(spec: str | Path):
@@ -69,8 +71,8 @@ def load_sb3_model(spec: str | Path):
         ValueError: no such file, or no SB3 class could load it.
     """
     path = policy_file(spec)
-    kind = str(spec).partition(":")[0]
-    if path != Path(spec):
+    kind, _, rest = str(spec).partition(":")
+    if rest and kind in SB3_CLASSES:
         kinds = [kind]
     else:
         detected = _sb3_kind_from_zip(path) if path.exists() else None
@@ -115,7 +117,7 @@ def training_config_file(policy_path: str | Path) -> Path | None:
     ``rlfd export`` writes), the run folder's ``config.json`` beside a ``policy.zip``,
     or above a checkpoint or best model in the run's ``checkpoints/`` or ``eval/``
     folder; None if there is none."""
-    path = Path(policy_path)
+    path = policy_file(policy_path)
     if path.with_suffix(".json").exists():
         return path.with_suffix(".json")
     if path.name == "policy.zip" and path.with_name("config.json").exists():

@@ -42,7 +42,7 @@ import numpy as np
 import yaml
 
 from rlfd_drake.geometry import quat_from_angle_axis, quat_multiply, rotation_vector_from_quat
-from rlfd_drake.paths import models_dir
+from rlfd_drake.paths import models_dir, shipped_path
 
 PART_KINDS = ("square_peg", "gear", "rj45_plug")
 FIXTURE_KINDS = ("square_hole", "square_shaft", "rj45_socket")
@@ -603,7 +603,7 @@ def load_task(name_or_path: str | Path, check_demo: bool = True) -> TaskSpec:
         ValueError: unknown task, unknown or missing field, bad value (the message names
             the field and the value), or missing demonstration file.
     """
-    path = Path(name_or_path)
+    path = shipped_path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
         path = tasks_dir() / f"{name_or_path}.yaml"
         if not path.exists():

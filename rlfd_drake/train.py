@@ -59,7 +59,7 @@ from rlfd_drake.observation_scaling import (
     ScaledObservation,
     contact_scales,
 )
-from rlfd_drake.policies import checkpoint_steps, load_sb3_model
+from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
 from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
@@ -318,7 +318,7 @@ class TrainConfig:
             raise ValueError(f"log_std_init must be finite, got {self.log_std_init}")
         if self.composition not in COMPOSITIONS:
             raise ValueError(f"composition must be one of {COMPOSITIONS}, got {self.composition!r}")
-        if self.init_from is not None and not Path(self.init_from).is_file():
+        if self.init_from is not None and not policy_file(self.init_from).is_file():
             raise ValueError(f"init_from must be a saved policy file, got {self.init_from!r}")
         if self.force_limit_n is not None and not (
             np.isfinite(self.force_limit_n) and self.force_limit_n > 0

@@ -452,3 +452,23 @@ def test_a_residual_that_starts_at_the_table_slope_needs_a_rate_and_the_range(tm
         path.write_text(yaml.safe_dump({**data, **changes}))
         with pytest.raises(ValueError, match=pattern):
             load_task(path)
+
+
+def test_a_models_path_written_from_the_checkout_loads_from_any_folder(tmp_path, monkeypatch):
+    """RUNS' and the README's commands name variants as models/tasks/variants/...; from a
+    folder without models/ (rlfd reproduce in an empty folder) they are the installed
+    package's. A path that exists here wins, and a missing one is named as given."""
+    from rlfd_drake.paths import models_dir, shipped_path
+
+    monkeypatch.chdir(tmp_path)
+    variant = "models/tasks/variants/gear_incremental_nopush.yaml"
+    assert shipped_path(variant) == models_dir() / "tasks/variants/gear_incremental_nopush.yaml"
+    assert load_task(variant).name == "gear_incremental_nopush"
+    with pytest.raises(ValueError, match="task file models/tasks/variants/nope.yaml does not"):
+        load_task("models/tasks/variants/nope.yaml")
+    assert shipped_path("elsewhere/peg.yaml") == Path("elsewhere/peg.yaml")
+    local = tmp_path / "models/tasks/variants/gear_incremental_nopush.yaml"
+    local.parent.mkdir(parents=True)
+    local.write_text("based_on: peg\nname: my_own\n")
+    assert shipped_path(variant) == Path(variant)
+    assert load_task(variant).name == "my_own"

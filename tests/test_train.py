@@ -713,3 +713,23 @@ def test_a_linear_schedule_run_ends_with_a_smaller_step_than_it_started(tmp_path
     train(constant, tmp_path / "constant", progress_bar=False)
     steady = load_model(tmp_path / "constant" / "policy.zip")
     assert steady.policy.optimizer.param_groups[0]["lr"] == pytest.approx(config.learning_rate)
+
+
+def test_a_shipped_policy_named_from_the_checkout_starts_a_run_from_any_folder(
+    tmp_path, monkeypatch
+):
+    """rlfd reproduce's transfer runs start from --init-from models/policies/<file>.zip:
+    from a folder without models/ that is the installed file, with its sidecar."""
+    from rlfd_drake.paths import SHIPPED_GEAR_POLICY, models_dir
+    from rlfd_drake.policies import policy_file, training_config_file
+
+    monkeypatch.chdir(tmp_path)
+    shipped = f"models/{SHIPPED_GEAR_POLICY}"
+    assert policy_file(shipped) == models_dir() / SHIPPED_GEAR_POLICY
+    assert policy_file(f"ppo:{shipped}") == models_dir() / SHIPPED_GEAR_POLICY
+    assert training_config_file(shipped) == (models_dir() / SHIPPED_GEAR_POLICY).with_suffix(
+        ".json"
+    )
+    assert TrainConfig(algo="ppo", init_from=shipped).init_from == shipped
+    with pytest.raises(ValueError, match="init_from must be a saved policy file"):
+        TrainConfig(algo="ppo", init_from="models/policies/nope.zip")
