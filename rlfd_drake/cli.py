@@ -449,9 +449,9 @@ def _print_training_plan(name: str, numbers: list[str], training_seeds: tuple[in
     quick = sum(run["quick_budget_trains"] for run in plan["runs"])
     print(
         f"\n{len(plan['runs'])} runs, {total:.1f} h of recorded training one at a time "
-        f"({plan['runs_without_record']} without a record); of those with neither a policy "
-        f"here nor a stored evaluation, rlfd reproduce --train-missing trains every one, "
-        f"the quick budget without it the {quick} short ones"
+        f"({plan['runs_without_record']} without a record); rlfd reproduce --train-missing "
+        "trains those with neither a policy here nor a stored evaluation, the quick budget "
+        f"without it only those among the {quick} short ones (quick budget trains: yes)"
     )
     path = write_result(
         f"reproduce_plan_{table_name(name, training_seeds).removeprefix('table_')}", plan

@@ -364,7 +364,9 @@ def test_the_training_plan_lists_every_run_a_table_rests_on_with_its_recorded_ti
     assert "'paper' stands alone" in capsys.readouterr().err
     # The default is the paper's tables; the plan says which runs the quick budget trains.
     assert main(["reproduce", "--plan"]) == 0
-    assert "the quick budget without it the 10 short ones" in capsys.readouterr().out
+    assert (
+        "the quick budget without it only those among the 10 short ones" in capsys.readouterr().out
+    )
     paper = json.loads((tmp_path / "results/reproduce_plan_paper.json").read_text())["data"]
     assert paper["tables"] == list(reproduce.PAPER_TABLES)
     quick = {run["folder"] for run in paper["runs"] if run["quick_budget_trains"]}
