@@ -433,9 +433,9 @@ def _print_training_plan(name: str, numbers: list[str], training_seeds: tuple[in
 
     plan = training_plan(numbers, training_seeds)
     print(
-        "| run | starts from | policy here | quick budget trains | recorded training min ", end=""
+        "| run | starts from | policy here | quick budget trains | recorded training min "
+        "| command |"
     )
-    print("| command |")
     print("|---|---|---|---|---|---|")
     yes_no = {True: "yes", False: "no"}
     for run in plan["runs"]:

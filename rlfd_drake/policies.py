@@ -54,11 +54,17 @@ def _sb3_kind_from_zip(path: Path) -> str | None:
     return None
 
 
+def _split_spec(spec: str | Path) -> tuple[str | None, str]:
+    """(kind, path) of a saved-model spec ``path`` or ``kind:path`` (kind None if not
+    given as one of SB3_CLASSES)."""
+    kind, _, rest = str(spec).partition(":")
+    return (kind, rest) if rest and kind in SB3_CLASSES else (None, str(spec))
+
+
 def policy_file(spec: str | Path) -> Path:
     """The file of a saved-model spec ``path`` or ``kind:path`` (kind in SB3_CLASSES);
     a ``models/...`` path not found here is the installed package's (``shipped_path``)."""
-    kind, _, rest = str(spec).partition(":")
-    return shipped_path(rest if rest and kind in SB3_CLASSES else spec)
+    return shipped_path(_split_spec(spec)[1])
 
 
 def load_sb3_model(spec: str | Path):
@@ -71,8 +77,8 @@ def load_sb3_model(spec: str | Path):
         ValueError: no such file, or no SB3 class could load it.
     """
     path = policy_file(spec)
-    kind, _, rest = str(spec).partition(":")
-    if rest and kind in SB3_CLASSES:
+    kind = _split_spec(spec)[0]
+    if kind is not None:
         kinds = [kind]
     else:
         detected = _sb3_kind_from_zip(path) if path.exists() else None

@@ -206,9 +206,14 @@ def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sa
     return folder, " ".join(p for p in parts if p)
 
 
+def _check_seed(name: str, value: int) -> None:
+    """ValueError naming ``name`` unless ``value`` is an integer >= 0 (bools refused)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+
+
 def _check_training_seed(training_seed: int) -> None:
-    if isinstance(training_seed, bool) or not isinstance(training_seed, int) or training_seed < 0:
-        raise ValueError(f"training_seed must be an integer >= 0, got {training_seed!r}")
+    _check_seed("training_seed", training_seed)
 
 
 def seeded_run(run: tuple[str, str], training_seed: int) -> tuple[str, str]:
@@ -340,12 +345,19 @@ def _short_jobs(jobs: list[TrainingJob], most_episodes: int) -> list[TrainingJob
     return [job for job in jobs if short[job.folder]]
 
 
-def train_runs(runs: list[tuple[str, str, int]], parallel: int = 1) -> None:
+def train_runs(
+    runs: list[tuple[str, str, int]], parallel: int = 1, most_episodes: int | None = None
+) -> bool:
     """Trains ``runs`` ((folder, command, training seed) of RUNS) and the runs they start
     from, up to ``parallel`` at once (:func:`rlfd_drake.run_queue.train_queue`: each by
     its ``rlfd train`` command in a subprocess with ``--resume``, a fine-tune after its
-    source)."""
-    train_queue(_training_jobs(runs), parallel)
+    source); with ``most_episodes``, only those that ``_short_jobs`` keeps. True if any
+    run was to be trained."""
+    jobs = _training_jobs(runs)
+    if most_episodes is not None:
+        jobs = _short_jobs(jobs, most_episodes)
+    train_queue(jobs, parallel)
+    return bool(jobs)
 
 
 def train_run(folder: str, command: str, training_seed: int = 0) -> None:
@@ -2245,8 +2257,7 @@ def _check_table_arguments(
     numbers: list[str], budget: str | None = None, seed: int = 0, workers: int = 1
 ) -> None:
     """ValueError naming the first bad argument, before anything trains or evaluates."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed (the evaluation seed) must be an integer >= 0, got {seed!r}")
+    _check_seed("seed (the evaluation seed)", seed)
     check_count("workers", workers)
     if not numbers:
         raise ValueError("tables must name at least one table, got none")
@@ -2275,13 +2286,17 @@ def reproduce_tables(
     _check_table_arguments(numbers, budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
     check_parallel_runs(parallel_runs)
-    if train_missing or budget == "quick":
-        wanted: list[tuple[str, str, int]] = []
-        for number in numbers:
-            _measure(TABLES[number], budget, seed, workers, training_seeds, wanted)
-        jobs = _training_jobs(wanted)
-        train_queue(jobs if train_missing else _short_jobs(jobs, QUICK_RUN_EPISODES), parallel_runs)
-    return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
+    if not (train_missing or budget == "quick"):
+        return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
+    wanted: list[tuple[str, str, int]] = []
+    surveyed = {}
+    for n in numbers:
+        print(f"{TABLES[n].title} (budget {budget})", flush=True)
+        surveyed[n] = _measure(TABLES[n], budget, seed, workers, training_seeds, wanted)
+    if train_runs(wanted, parallel_runs, None if train_missing else QUICK_RUN_EPISODES):
+        return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
+    # Nothing trained: the survey's cells are the tables' (no stored file read again).
+    return [_write_table(n, surveyed[n], budget, seed, training_seeds) for n in numbers]
 
 
 def reproduce_table(
@@ -2296,10 +2311,22 @@ def reproduce_table(
     runs first); writes results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
     _check_table_arguments([number], budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
+    print(f"{TABLES[number].title} (budget {budget})", flush=True)
+    measured = _measure(TABLES[number], budget, seed, workers, training_seeds)
+    return _write_table(number, measured, budget, seed, training_seeds)
+
+
+def _write_table(
+    number: str,
+    measured: dict[str, dict[str, tuple[dict, dict | None]]],
+    budget: str,
+    seed: int,
+    training_seeds: tuple[int, ...],
+) -> dict:
+    """Writes table ``number`` from its ``measured`` cells (``_measure``) to
+    results/<table_name>.{md,json,png} and returns its data."""
     table = TABLES[number]
     name = table_name(number, training_seeds)
-    print(f"{table.title} (budget {budget})", flush=True)
-    measured = _measure(table, budget, seed, workers, training_seeds)
     cells = {label: {c: cell for c, (cell, _) in row.items()} for label, row in measured.items()}
     evaluations = {label: {c: r for c, (_, r) in row.items()} for label, row in measured.items()}
     markdown = _markdown(table, cells, budget, seed, training_seeds)
