@@ -56,6 +56,16 @@ from rlfd_drake.view import (
 
 #: The residual's dimension: translation (3) then angle-axis (3), in [-1, 1].
 RESIDUAL_SIZE = 6
+#: The outputs an episode can log (``RlfdDiagram.logs``), each every ``log_period_s``.
+LOGGED_OUTPUTS = (
+    "panda_state",
+    "X_WE_desired",
+    "X_WE_base",
+    "residual",
+    "observation",
+    "distance_to_goal",
+    "force_metrics",
+)
 
 
 #: The controller gains a task may set: each TaskSpec field (a scalar, or None for the
@@ -92,6 +102,9 @@ class RlfdDiagramConfig:
             (``residual_period_s``: 0.1 s, the paper's 10 Hz).
         log_period_s: period of the episode logs; None = no logs (training, where
             nobody reads them).
+        logged_outputs: which of ``LOGGED_OUTPUTS`` are logged (None: all). Each log
+            evaluates its output at every sample, which costs: ``run_episode`` keeps
+            the two it reads.
         composition: one of ``COMPOSITIONS``.
         max_speed_m_s, max_angular_speed_rad_s: velocity of an action of 1 for the
             "hybrid" and "pure" compositions (5 cm/s, 20 deg/s).
@@ -107,6 +120,7 @@ class RlfdDiagramConfig:
     residual_activation_s: float | None = None
     residual_period_s: float | None = None
     log_period_s: float | None = 0.01
+    logged_outputs: tuple[str, ...] | None = None
     composition: str = "residual"
     max_speed_m_s: float = 0.05
     max_angular_speed_rad_s: float = 0.35
@@ -129,6 +143,11 @@ class RlfdDiagramConfig:
                 raise ValueError(f"{name} must be a positive number or None, got {value}")
         if self.composition not in COMPOSITIONS:
             raise ValueError(f"composition must be one of {COMPOSITIONS}, got {self.composition!r}")
+        unknown = set(self.logged_outputs or ()) - set(LOGGED_OUTPUTS)
+        if unknown:
+            raise ValueError(
+                f"logged_outputs must be among {LOGGED_OUTPUTS}, got {self.logged_outputs!r}"
+            )
 
     def residual_bounds(self, task: TaskSpec) -> tuple[float, float]:
         """(m, rad) of a residual action of 1 on ``task``: this config's or the task's."""
@@ -411,28 +430,20 @@ def BuildRlfdDiagram(
     builder.ExportOutput(dmp_system.GetOutputPort("phase"), "phase")
 
     period = config.log_period_s
+    logged = {
+        "panda_state": plant.get_state_output_port(scene.panda),
+        "X_WE_desired": composer.GetOutputPort("X_WE_desired"),
+        "X_WE_base": extrapolator.GetOutputPort("X_WE_desired"),
+        "residual": residual_source,
+        "observation": observer.GetOutputPort("observation"),
+        "distance_to_goal": observer.GetOutputPort("distance_to_goal"),
+        "force_metrics": observer.GetOutputPort("force_metrics"),
+    }
+    names = LOGGED_OUTPUTS if config.logged_outputs is None else config.logged_outputs
     logs = (
         {}
         if period is None
-        else {
-            "panda_state": LogVectorOutput(
-                plant.get_state_output_port(scene.panda), builder, period
-            ),
-            "X_WE_desired": LogVectorOutput(
-                composer.GetOutputPort("X_WE_desired"), builder, period
-            ),
-            "X_WE_base": LogVectorOutput(
-                extrapolator.GetOutputPort("X_WE_desired"), builder, period
-            ),
-            "residual": LogVectorOutput(residual_source, builder, period),
-            "observation": LogVectorOutput(observer.GetOutputPort("observation"), builder, period),
-            "distance_to_goal": LogVectorOutput(
-                observer.GetOutputPort("distance_to_goal"), builder, period
-            ),
-            "force_metrics": LogVectorOutput(
-                observer.GetOutputPort("force_metrics"), builder, period
-            ),
-        }
+        else {name: LogVectorOutput(logged[name], builder, period) for name in names}
     )
     if meshcat is not None:
         from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams

@@ -2286,6 +2286,24 @@ def reproduce_tables(
     _check_table_arguments(numbers, budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
     check_parallel_runs(parallel_runs)
+    from rlfd_drake.evaluate import shared_evaluation_workers
+
+    with shared_evaluation_workers(workers):
+        return _reproduce_tables(
+            numbers, budget, seed, workers, training_seeds, train_missing, parallel_runs
+        )
+
+
+def _reproduce_tables(
+    numbers: list[str],
+    budget: str,
+    seed: int,
+    workers: int,
+    training_seeds: tuple[int, ...],
+    train_missing: bool,
+    parallel_runs: int,
+) -> list[dict]:
+    """``reproduce_tables`` once its arguments are checked and its workers started."""
     if not (train_missing or budget == "quick"):
         return [reproduce_table(n, budget, seed, workers, training_seeds) for n in numbers]
     wanted: list[tuple[str, str, int]] = []
@@ -2311,8 +2329,11 @@ def reproduce_table(
     runs first); writes results/<table_name>.{md,json,png} (the figure: see ``_plot``)."""
     _check_table_arguments([number], budget, seed, workers)
     training_seeds = _check_training_seeds(training_seeds)
+    from rlfd_drake.evaluate import shared_evaluation_workers
+
     print(f"{TABLES[number].title} (budget {budget})", flush=True)
-    measured = _measure(TABLES[number], budget, seed, workers, training_seeds)
+    with shared_evaluation_workers(workers):
+        measured = _measure(TABLES[number], budget, seed, workers, training_seeds)
     return _write_table(number, measured, budget, seed, training_seeds)
 
 

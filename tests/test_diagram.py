@@ -19,12 +19,13 @@ from pydrake.systems.analysis import Simulator
 from rlfd_drake.control_math import cartesian_impedance_torque
 from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import (
+    LOGGED_OUTPUTS,
     BuildRlfdDiagram,
     RlfdDiagramConfig,
     SetEpisodeStart,
 )
 from rlfd_drake.dmp import fit_cartesian_dmp
-from rlfd_drake.episode import demo_start_pose
+from rlfd_drake.episode import EPISODE_LOGS, demo_start_pose
 from rlfd_drake.geometry import quat_conjugate, quat_multiply
 from rlfd_drake.panda import PANDA_TORQUE_LIMITS_NM
 from rlfd_drake.tasks import load_task
@@ -376,3 +377,14 @@ def test_a_phase_stopped_dmp_waits_while_the_fixture_holds_the_part_back(peg):
     assert rlfd.dmp.time_scale(dmp_context) > 10.0
     phase = rlfd.dmp.GetOutputPort("phase").Eval(dmp_context)[0]
     assert phase > 2.0 * open_loop_phase(EPISODE_S)
+
+
+def test_the_config_chooses_which_outputs_are_logged(peg):
+    """By default every output of LOGGED_OUTPUTS is logged; logged_outputs keeps some
+    (run_episode: the two it reads), and names no other."""
+    task, model, _ = peg
+    assert set(BuildRlfdDiagram(task, model).logs) == set(LOGGED_OUTPUTS)
+    kept = BuildRlfdDiagram(task, model, RlfdDiagramConfig(logged_outputs=EPISODE_LOGS))
+    assert set(kept.logs) == set(EPISODE_LOGS) == {"distance_to_goal", "force_metrics"}
+    with pytest.raises(ValueError, match="logged_outputs must be among .*'contact'"):
+        RlfdDiagramConfig(logged_outputs=("force_metrics", "contact"))

@@ -17,6 +17,7 @@ from rlfd_drake.evaluate import (
     evaluation_markdown,
     make_policy,
     result_from_json,
+    shared_evaluation_workers,
     success_by_fixture_error,
     write_evaluation,
 )
@@ -72,6 +73,48 @@ def test_evaluate_is_the_same_in_worker_processes(dmp_result):
     r = evaluate("peg_easy", "dmp", episodes=2, seed=0, workers=2, progress=False)
     for key in ("success", "insertion_time_s", "final_distance_mm", "failure"):
         assert r["episode_table"][key] == dmp_result["episode_table"][key][:2]
+
+
+def test_evaluations_share_one_pool_of_workers_inside_the_block(dmp_result):
+    """Inside shared_evaluation_workers two evaluations of different policies run in one
+    pool (spawned once), each episode as in a pool of its own and as in-process."""
+    import rlfd_drake.evaluate as evaluate_module
+
+    with shared_evaluation_workers(2):
+        pool = evaluate_module._SHARED_POOL["pool"]
+        with shared_evaluation_workers(2):  # nested: the same pool
+            assert evaluate_module._SHARED_POOL["pool"] is pool
+        first = evaluate("peg_easy", "dmp", episodes=2, seed=0, workers=2, progress=False)
+        second = evaluate("peg_easy", "random", episodes=2, seed=0, workers=2, progress=False)
+        assert evaluate_module._SHARED_POOL["pool"] is pool
+    assert evaluate_module._SHARED_POOL == {}
+    alone = evaluate("peg_easy", "random", episodes=2, seed=0, workers=2, progress=False)
+    for key in ("success", "insertion_time_s", "final_distance_mm", "peak_force_n"):
+        assert first["episode_table"][key] == dmp_result["episode_table"][key][:2]
+        assert second["episode_table"][key] == alone["episode_table"][key]
+    with pytest.raises(ValueError, match="workers must be an integer >= 1, got 0"):
+        with shared_evaluation_workers(0):
+            pass
+
+
+def test_a_policy_file_saved_again_at_its_path_is_loaded_again(tmp_path):
+    """The per-process model cache follows the file: a run retrained at the same path
+    (a long-lived worker) acts with the new policy, not the one read first."""
+    from stable_baselines3 import PPO
+
+    path = tmp_path / "policy.zip"
+    obs = np.linspace(-1, 1, OBSERVATION_SIZE).astype(np.float32)
+    actions = []
+    for seed in (0, 1):
+        PPO("MlpPolicy", _ResidualEnv(), device="cpu", seed=seed).save(path)
+        policy = make_policy(str(path))
+        policy.reset()
+        actions.append(policy(obs))
+    assert not np.allclose(actions[0], actions[1])
+    PPO("MlpPolicy", _ResidualEnv(), device="cpu", seed=0).save(path)
+    policy = make_policy(str(path))
+    policy.reset()
+    np.testing.assert_allclose(policy(obs), actions[0], atol=1e-6)
 
 
 def test_write_evaluation(dmp_result, tmp_path, monkeypatch):

@@ -187,7 +187,8 @@ class Observer(LeafSystem):
     # -- discrete update ------------------------------------------------------------
     def _update_metrics(self, context: Context, discrete_state: DiscreteValues) -> None:
         x = context.get_discrete_state(0).get_value()
-        force = self.TotalContactForce(self._contacts.Eval(context))
+        # EvalAbstract: the results by reference, not copied into Python (500 Hz).
+        force = self.TotalContactForce(self._contacts.EvalAbstract(context).get_value())
         tau = float(np.max(np.abs(self._tau_contact.Eval(context))))
         # Each event writes its own entries only: when both fire at once, Drake hands
         # them the same copy of the state.
