@@ -47,6 +47,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         )
     if args.tasks and args.what != "diagram":
         raise ValueError(f"--tasks: only the diagram benchmark takes tasks, not {args.what!r}")
+    if (args.against is not None) != (args.what == "evaluate"):
+        raise ValueError(
+            "--against REV: the evaluate benchmark needs it (the commit to compare with) "
+            f"and only it takes it, got {args.against!r} for {args.what!r}"
+        )
     name = f"bench_{args.what}"
     if args.what == "sim":
         from rlfd_drake.bench import sim
@@ -80,6 +85,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         name = f"bench_train_queue_{data['runs']}x{data['episodes']}"
         if args.queue_parallel is not None:
             name += "_at_once_" + "_".join(data["wall_s"])
+    elif args.what == "evaluate":
+        from rlfd_drake.bench import evaluate_speed
+
+        data = evaluate_speed.run(against=args.against, repeats=args.repeats)
+        name = f"bench_evaluate_vs_{data['against_commit'][:7]}"
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
     path = write_result(name, data)
@@ -683,9 +693,18 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="speed benchmarks, written to results/")
     bench.add_argument(
         "what",
-        choices=["sim", "dmp", "diagram", "train-queue"],
+        choices=["sim", "dmp", "diagram", "train-queue", "evaluate"],
         help="train-queue: 4 short PPO runs one at a time against two at a time (rlfd "
-        "reproduce --train-missing's --parallel-runs)",
+        "reproduce --train-missing's --parallel-runs); evaluate: evaluations as rlfd "
+        "reproduce runs them, this code against --against's, alternating",
+    )
+    bench.add_argument(
+        "--against",
+        default=None,
+        metavar="REV",
+        help="evaluate only: the git revision of this checkout to compare with (results/"
+        "bench_evaluate_vs_<commit>.json: each code's median wall time of the same 4 cells "
+        "of 8 starts, the speed-up and whether the episodes were the same)",
     )
     bench.add_argument("--json", action="store_true", help="print the JSON result")
     bench.add_argument("--repeats", type=int, default=5, help="runs per figure (median)")

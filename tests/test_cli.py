@@ -291,6 +291,10 @@ def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert "--tasks: only the diagram benchmark takes tasks, not 'sim'" in capsys.readouterr().err
     assert main(["bench", "dmp", "--queue-episodes", "5"]) == 2
     assert "only the train-queue benchmark takes them, not 'dmp'" in capsys.readouterr().err
+    assert main(["bench", "evaluate"]) == 2
+    assert "--against REV: the evaluate benchmark needs it" in capsys.readouterr().err
+    assert main(["bench", "sim", "--against", "HEAD"]) == 2
+    assert "got 'HEAD' for 'sim'" in capsys.readouterr().err
 
 
 def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
