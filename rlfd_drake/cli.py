@@ -36,6 +36,13 @@ def _cmd_tasks(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_cell(words: list[str]) -> tuple[str, str, str]:
+    """(task, policy, residual mode) of one ``--cell TASK POLICY [MODE]``."""
+    if len(words) not in (2, 3):
+        raise ValueError(f"--cell takes TASK POLICY [MODE], got {' '.join(words)!r}")
+    return (words[0], words[1], words[2] if len(words) == 3 else "full")
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from rlfd_drake.results import write_result
 
@@ -47,6 +54,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         )
     if args.tasks and args.what != "diagram":
         raise ValueError(f"--tasks: only the diagram benchmark takes tasks, not {args.what!r}")
+    if (args.cell or args.starts is not None) and args.what != "evaluate":
+        raise ValueError(
+            f"--cell/--starts: only the evaluate benchmark takes them, not {args.what!r}"
+        )
     if (args.against is not None) != (args.what == "evaluate"):
         raise ValueError(
             "--against REV: the evaluate benchmark needs it (the commit to compare with) "
@@ -88,8 +99,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     elif args.what == "evaluate":
         from rlfd_drake.bench import evaluate_speed
 
-        data = evaluate_speed.run(against=args.against, repeats=args.repeats)
+        cells = {}
+        if args.cell:
+            cells["cells"] = [_bench_cell(cell) for cell in args.cell]
+        if args.starts is not None:
+            cells["episodes"] = args.starts
+        data = evaluate_speed.run(against=args.against, repeats=args.repeats, **cells)
         name = f"bench_evaluate_vs_{data['against_commit'][:7]}"
+        if args.cell:  # chosen cells are their own record
+            name += "_" + "__".join(f"{Path(t).stem}_{Path(p).stem}" for t, p, _ in cells["cells"])
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
     path = write_result(name, data)
@@ -697,6 +715,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="train-queue: 4 short PPO runs one at a time against two at a time (rlfd "
         "reproduce --train-missing's --parallel-runs); evaluate: evaluations as rlfd "
         "reproduce runs them, this code against --against's, alternating",
+    )
+    bench.add_argument(
+        "--cell",
+        nargs="+",
+        action="append",
+        metavar="WORD",
+        help="evaluate only: TASK POLICY [MODE] instead of the 4 default cells (repeat the "
+        "flag for several; results/bench_evaluate_vs_<commit>_<task>_<policy>.json)",
+    )
+    bench.add_argument(
+        "--starts",
+        type=int,
+        default=None,
+        help="evaluate only: starts per cell (default 8)",
     )
     bench.add_argument(
         "--against",

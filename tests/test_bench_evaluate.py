@@ -25,6 +25,8 @@ def test_the_benchmark_times_both_codes_on_the_same_episodes():
         against="HEAD", repeats=1, episodes=2, cells=(("peg_easy", "dmp", "full"),)
     )
     assert data["same_episodes"] is True
+    assert data["success_pct"]["this"] == data["success_pct"]["against"]
+    assert len(data["success_pct"]["this"]) == 1 and 0 <= data["success_pct"]["this"][0] <= 100
     assert set(data["wall_s"]) == {"this", "against"} and min(data["wall_s"].values()) > 0
     assert data["speedup"] == pytest.approx(data["wall_s"]["against"] / data["wall_s"]["this"])
     assert len(data["against_commit"]) == 40 and data["samples_s"]["this"] == [

@@ -295,6 +295,12 @@ def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert "--against REV: the evaluate benchmark needs it" in capsys.readouterr().err
     assert main(["bench", "sim", "--against", "HEAD"]) == 2
     assert "got 'HEAD' for 'sim'" in capsys.readouterr().err
+    assert main(["bench", "sim", "--cell", "peg", "dmp"]) == 2
+    assert "--cell/--starts: only the evaluate benchmark takes them, not 'sim'" in (
+        capsys.readouterr().err
+    )
+    assert main(["bench", "evaluate", "--against", "HEAD", "--cell", "peg"]) == 2
+    assert "--cell takes TASK POLICY [MODE], got 'peg'" in capsys.readouterr().err
 
 
 def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):

@@ -62,7 +62,10 @@ print("RESULT " + json.dumps(out))
 
 
 def _absolute(name: str) -> str:
-    """A name under models/ made absolute (both codes read the same files)."""
+    """A file here or under models/ made absolute (both codes read the same files,
+    from the temporary folder they run in)."""
+    if Path(name).exists():
+        return str(Path(name).resolve())
     path = models_dir() / name
     return str(path) if path.exists() else name
 
@@ -135,7 +138,8 @@ def run(
 
     Returns:
         ``{"wall_s": {"this", "against"}, "speedup": against / this,
-        "samples_s", "per_episode_s", "same_episodes", "against_commit", "cells",
+        "samples_s", "per_episode_s", "same_episodes", "success_pct" (per code, per
+        cell, of the last repeat), "against_commit", "cells",
         "episodes", "repeats", "seed"}``.
     """
     check_count("repeats", repeats)
@@ -161,12 +165,17 @@ def run(
                 episodes_of[code] = [cell["episodes"] for cell in result["cells"]]
     wall = {code: statistics.median(s) for code, s in samples.items()}
     total = episodes * len(cells)
+    success_pct = {
+        code: [100.0 * sum(cell["success"]) / episodes for cell in of]
+        for code, of in episodes_of.items()
+    }
     return {
         "wall_s": wall,
         "speedup": wall["against"] / wall["this"],
         "samples_s": samples,
         "per_episode_s": {code: w / total for code, w in wall.items()},
         "same_episodes": episodes_of["this"] == episodes_of["against"],
+        "success_pct": success_pct,
         "against": against,
         "against_commit": commit,
         "cells": [list(cell) for cell in cells],
