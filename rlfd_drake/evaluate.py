@@ -247,7 +247,7 @@ def make_policy(
             pass
         _MODEL_CACHE[key] = (
             load_sb3_model(policy_spec)[0],
-            trained_base_correction(policy_file(policy_spec)),
+            trained_base_correction(path),
         )
     model, base_correction = _MODEL_CACHE[key]
     policy = DeployedPolicy(
@@ -270,7 +270,8 @@ def make_policy(
 # Running episodes (in this process or in workers).
 # --------------------------------------------------------------------------------------
 _WORKER: dict[str, object] = {}
-#: The pool ``evaluate`` reuses inside ``shared_evaluation_workers`` (else None).
+#: The pool ``evaluate`` reuses inside ``shared_evaluation_workers`` ("workers", "pool";
+#: empty outside one).
 _SHARED_POOL: dict[str, object] = {}
 
 

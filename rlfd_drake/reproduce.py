@@ -76,7 +76,13 @@ from rlfd_drake.paths import (
 )
 from rlfd_drake.results import results_dir, spread_over_seeds, write_result
 from rlfd_drake.run_log import run_log_file
-from rlfd_drake.run_queue import TrainingJob, check_count, check_parallel_runs, train_queue
+from rlfd_drake.run_queue import (
+    TrainingJob,
+    check_count,
+    check_parallel_runs,
+    check_seed,
+    train_queue,
+)
 
 __all__ = [
     "BUDGETS",
@@ -206,14 +212,8 @@ def _run(folder: str, task: str, episodes: int, flags: str = "", algo: str = "sa
     return folder, " ".join(p for p in parts if p)
 
 
-def _check_seed(name: str, value: int) -> None:
-    """ValueError naming ``name`` unless ``value`` is an integer >= 0 (bools refused)."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
-
-
 def _check_training_seed(training_seed: int) -> None:
-    _check_seed("training_seed", training_seed)
+    check_seed("training_seed", training_seed)
 
 
 def seeded_run(run: tuple[str, str], training_seed: int) -> tuple[str, str]:
@@ -2257,7 +2257,7 @@ def _check_table_arguments(
     numbers: list[str], budget: str | None = None, seed: int = 0, workers: int = 1
 ) -> None:
     """ValueError naming the first bad argument, before anything trains or evaluates."""
-    _check_seed("seed (the evaluation seed)", seed)
+    check_seed("seed (the evaluation seed)", seed)
     check_count("workers", workers)
     if not numbers:
         raise ValueError("tables must name at least one table, got none")

@@ -25,6 +25,7 @@ __all__ = [
     "TrainingFailed",
     "TrainingJob",
     "check_count",
+    "check_seed",
     "check_parallel_runs",
     "default_parallel_runs",
     "train_queue",
@@ -95,6 +96,12 @@ def check_count(name: str, value: int) -> None:
     """ValueError naming ``name`` unless ``value`` is an integer >= 1 (bools refused)."""
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+
+def check_seed(name: str, value: int) -> None:
+    """ValueError naming ``name`` unless ``value`` is an integer >= 0 (bools refused)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
 
 
 def check_parallel_runs(parallel: int) -> None:

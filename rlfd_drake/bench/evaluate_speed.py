@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 from rlfd_drake.paths import models_dir
-from rlfd_drake.run_queue import check_count
+from rlfd_drake.run_queue import check_count, check_seed
 
 __all__ = ["DEFAULT_CELLS", "run"]
 
@@ -144,8 +144,7 @@ def run(
     """
     check_count("repeats", repeats)
     check_count("episodes", episodes)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    check_seed("seed", seed)
     cells = _cells(cells)
     samples: dict[str, list[float]] = {"this": [], "against": []}
     episodes_of: dict[str, list] = {}

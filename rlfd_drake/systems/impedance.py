@@ -28,14 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform
-
-try:
-    # The LAPACK solve behind np.linalg.solve (the same numbers), without its per-call
-    # checks and error-state switching: 5 % of an episode at 500 Hz. A singular J J^T
-    # gives non-finite numbers, which _update refuses.
-    from numpy.linalg._umath_linalg import solve1 as _solve
-except ImportError:  # pragma: no cover - a numpy that moved it
-    _solve = np.linalg.solve
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     FixedOffsetFrame,
@@ -52,6 +44,14 @@ from rlfd_drake.control_math import (
     rotation_vector_between,
 )
 from rlfd_drake.panda import PANDA_HAND_BODY, PANDA_HOME_Q, PANDA_TORQUE_LIMITS_NM, AddPanda
+
+try:
+    # The LAPACK solve behind np.linalg.solve (the same numbers), without its per-call
+    # checks and error-state switching: 5 % of an episode at 500 Hz. A singular J J^T
+    # gives non-finite numbers, which _update refuses.
+    from numpy.linalg._umath_linalg import solve1 as _solve
+except ImportError:  # pragma: no cover - a numpy that moved it
+    _solve = np.linalg.solve
 
 #: Name of the controlled frame E in the control model.
 CONTROL_FRAME_NAME = "controlled_frame_E"
