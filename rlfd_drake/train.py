@@ -35,6 +35,7 @@ from stable_baselines3.common.callbacks import (
     EventCallback,
 )
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
@@ -523,7 +524,8 @@ def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
 
 
 def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
-    """A new SB3 model with the paper's architecture where it states one."""
+    """A new SB3 model with the paper's architecture where it states one, logging to
+    TensorBoard in ``tensorboard_dir``, or nowhere (and writing no files) for None."""
     inputs = (
         dict(
             features_extractor_class=ScaledObservation,
@@ -594,6 +596,10 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             **common,
         )
     zero_residual_output(model, config.log_std_init)
+    if tensorboard_dir is None:
+        # Without it, every learn() of SB3 makes an empty folder tmp/SB3-<time> for a
+        # logger that writes nothing (verbose 0): a test suite left dozens behind.
+        model.set_logger(Logger(folder=None, output_formats=[]))
     return model
 
 

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import re
+import tempfile
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -608,6 +610,7 @@ def test_timeout_terminal_makes_the_learner_treat_the_time_limit_as_terminal(tim
     assert ends[:3] == [(False, False)] * 3
     assert ends[3] == ((True, False) if timeout_terminal else (False, True))
     model = SAC("MlpPolicy", DummyVecEnv([make]), learning_starts=100, seed=0)
+    model.set_logger(Logger(folder=None, output_formats=[]))  # no tmp/SB3-<time> folder
     model.learn(total_timesteps=4)
     buffer = model.replay_buffer
     # SB3 bootstraps a step whose timeout flag is set; a terminal one scores 0 after.
@@ -733,3 +736,17 @@ def test_a_shipped_policy_named_from_the_checkout_starts_a_run_from_any_folder(
     assert TrainConfig(algo="ppo", init_from=shipped).init_from == shipped
     with pytest.raises(ValueError, match="init_from must be a saved policy file"):
         TrainConfig(algo="ppo", init_from="models/policies/nope.zip")
+
+
+def test_learning_without_tensorboard_leaves_no_folder_behind(tmp_path, monkeypatch):
+    # SB3's default logger makes tmp/SB3-<time> at every learn(), even writing nothing.
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    for config in (
+        TrainConfig(algo="ppo", envs=1, ppo_n_steps=16),
+        TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=8),
+    ):
+        model = make_model(config, fast_venv(), None)
+        model.learn(total_timesteps=16)
+        assert model._n_updates > 0
+    assert list(tmp_path.iterdir()) == []
