@@ -1158,7 +1158,9 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "--policy",
         default="dmp",
-        help="dmp | random | force_search | PATH to a policy zip or baseline.npz",
+        help="dmp | random | force_search | force_search_toward (its mirror, for a hole "
+        "going onto a shaft) | slope | fixture_oracle | PATH to a policy zip or "
+        "baseline.npz; A|B: translation from A, orientation from B",
     )
     evaluate.add_argument("--episodes", type=int, default=None, help="default: the task's grid")
     evaluate.add_argument("--seed", type=int, default=0)
@@ -1260,7 +1262,9 @@ def build_parser() -> argparse.ArgumentParser:
     view = sub.add_parser("view", help="run one episode in Meshcat (live or as an HTML replay)")
     view.add_argument("--task", default="peg_easy")
     view.add_argument(
-        "--policy", default="dmp", help="dmp | random | force_search | PATH to a policy zip"
+        "--policy",
+        default="dmp",
+        help="dmp | random | force_search | force_search_toward | PATH to a policy zip",
     )
     view.add_argument("--seed", type=int, default=0, help="seed of the start and fixture error")
     view.add_argument("--html", help="save a standalone HTML replay here instead of live")

@@ -8,7 +8,9 @@ Policies are named by a string, so that worker processes can build their own:
 * ``"random"``: the Random baseline (uniform corrections in [-1, 1]; which parts are
   randomised follows ``residual_mode``), reseeded per episode from (seed, episode).
 * ``"force_search"``: a hand-written force-guided search (not a paper baseline: a
-  reference for what the observation allows; see ``baselines/force_guided.py``).
+  reference for what the observation allows; see ``baselines/force_guided.py``);
+  ``"force_search_toward"`` its mirror image, pushing toward the centre of pressure
+  (for a hole that goes onto a shaft).
 * ``"slope"`` / ``"fixture_oracle"``: a constant rotation that undoes the table slope /
   the episode's whole fixture rotation (references that know what the robot does not;
   ``baselines/orientation_reference.py``), e.g. ``"force_search|fixture_oracle"``.
@@ -115,7 +117,7 @@ RESULT_KEYS = (
 #: (``shared_evaluation_workers``) while a run may be retrained at the same path.
 _MODEL_CACHE: dict[tuple[str, int, int], tuple[object, str | None]] = {}
 #: Policies named by a word rather than a file.
-NAMED_POLICIES = ("dmp", "random", "force_search", "slope", "fixture_oracle")
+NAMED_POLICIES = ("dmp", "random", "force_search", "force_search_toward", "slope", "fixture_oracle")
 
 
 #: Joins the saved policies of an ensemble spec ("a.zip+b.zip").
@@ -206,14 +208,14 @@ def make_policy(
                 "of a translation|orientation policy"
             )
         return kit.policy
-    if policy_spec in ("force_search", "slope", "fixture_oracle"):
+    if policy_spec in ("force_search", "force_search_toward", "slope", "fixture_oracle"):
         from rlfd_drake.base_correction import check_offset_rule
 
         check_offset_rule(policy_spec, task)
-    if policy_spec == "force_search":
+    if policy_spec in ("force_search", "force_search_toward"):
         from rlfd_drake.baselines.force_guided import ForceGuidedSearch
 
-        return ForceGuidedSearch()
+        return ForceGuidedSearch(toward_pressure=policy_spec == "force_search_toward")
     if policy_spec in ("slope", "fixture_oracle"):
         from rlfd_drake.baselines.orientation_reference import (
             fixture_rotation_residual,

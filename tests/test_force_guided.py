@@ -41,6 +41,18 @@ def test_in_contact_it_lifts_and_moves_away_from_the_centre_of_pressure():
     np.testing.assert_allclose(search(_observation([0, 0, -80], [0, 0, 0])), [0, 0, 1, 0, 0, 0])
 
 
+def test_its_mirror_image_moves_toward_the_centre_of_pressure():
+    """A hole going onto a shaft rests on the shaft where they overlap: the shaft is on
+    the centre of pressure's side, so the mirror search pushes that way."""
+    r, f_z = np.array([-0.01, 0.02, -0.1]), -80.0
+    pressed = _observation([0, 0, f_z], np.cross(r, [0.0, 0.0, f_z]))
+    away = ForceGuidedSearch()(pressed)
+    toward = make_policy("force_search_toward")(pressed)
+    np.testing.assert_allclose(away[:2], -r[:2] / np.linalg.norm(r[:2]), atol=1e-12)
+    np.testing.assert_allclose(toward, [-away[0], -away[1], 1.0, 0, 0, 0], atol=1e-12)
+    assert "toward_pressure=True" in repr(make_policy("force_search_toward"))
+
+
 def test_bad_settings_are_named():
     with pytest.raises(ValueError, match="contact_force_n must be a positive number, got -1"):
         ForceGuidedSearch(contact_force_n=-1.0)

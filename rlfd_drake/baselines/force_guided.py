@@ -12,6 +12,12 @@ The Observer reports the load the part puts on the wrist (pressing down: F_z < 0
 For a vertical load F = (0, 0, F_z) whose centre of pressure lies at r from the wrist,
 tau = r x F = (r_y F_z, -r_x F_z, 0), so (-tau_y, tau_x) = F_z r_xy points from the
 centre of pressure across the part (F_z < 0): toward the hole.
+
+A part with a hole that goes onto a shaft (the gear) is the mirror image: it rests on
+the shaft's top where the two overlap, so the shaft lies on the centre of pressure's
+side and the search must push toward it (``toward_pressure``). The one direction that
+helps one kind of task is the one that hurts the other (``results/full_pose_study.md``,
+section 32).
 """
 
 from __future__ import annotations
@@ -37,6 +43,8 @@ class ForceGuidedSearch:
             (the part is centred, or not yet loaded): lift only.
         lift: upward residual while in contact, in [0, 1] of the residual's range.
         push: sideways residual while in contact, in [0, 1] of the residual's range.
+        toward_pressure: push toward the centre of pressure instead of away from it
+            (a hole going onto a shaft rather than a part going into a hole).
         observer: the Observer's units (to read the wrench in N and N m); None = defaults.
 
     Raises:
@@ -50,6 +58,7 @@ class ForceGuidedSearch:
         min_torque_nm: float = 0.05,
         lift: float = 1.0,
         push: float = 1.0,
+        toward_pressure: bool = False,
         observer: ObserverConfig | None = None,
     ):
         for name, value in (("contact_force_n", contact_force_n), ("min_torque_nm", min_torque_nm)):
@@ -62,6 +71,8 @@ class ForceGuidedSearch:
         self.min_torque_nm = float(min_torque_nm)
         self.lift = float(lift)
         self.push = float(push)
+        self.toward_pressure = bool(toward_pressure)
+        self._push_sign = -1.0 if toward_pressure else 1.0
         observer = observer if observer is not None else ObserverConfig()
         self._torque_scale = observer.torque_scale_Nm
         self._force_scale = observer.force_scale_N
@@ -80,11 +91,12 @@ class ForceGuidedSearch:
         across = np.array([-torque[1], torque[0]])
         size = float(np.linalg.norm(across))
         if size >= self.min_torque_nm:
-            action[0:2] = self.push * across / size
+            action[0:2] = (self._push_sign * self.push / size) * across
         return action
 
     def __repr__(self) -> str:
         return (
             f"ForceGuidedSearch(contact_force_n={self.contact_force_n}, "
-            f"min_torque_nm={self.min_torque_nm}, lift={self.lift}, push={self.push})"
+            f"min_torque_nm={self.min_torque_nm}, lift={self.lift}, push={self.push}, "
+            f"toward_pressure={self.toward_pressure})"
         )
