@@ -475,13 +475,14 @@ RUNS["rlfd_ppo_std2_tt"] = {task: _ppo_std2_run(task, task, 700) for task in _PH
 # 700 more episodes of the same recipe from each 700-episode policy (a new optimiser).
 RUNS["rlfd_ppo_std2_tt_1400"] = {
     task: _run(
-        f"runs/{task}_ppo_std2_so_tt_e700_then700_s0",
+        RUNS["rlfd_ppo_std2_tt"][task][0].replace("_e700_s0", "_e700_then700_s0"),
         task,
         700,
-        f"{_PPO_STD2_FLAGS} --init-from {RUNS['rlfd_ppo_std2_tt'][task][0]}/policy.zip",
+        f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip()
+        + f" --init-from {RUNS['rlfd_ppo_std2_tt'][task][0]}/policy.zip",
         algo="ppo",
     )
-    for task in ("peg", "gear")
+    for task in _PHYSICAL
 }
 # The same recipe with an incremental residual (the action is a rate integrated into the
 # offset, systems/residual_integrator.py): results/full_pose_study.md, section 9.

@@ -96,16 +96,26 @@ def test_rows_that_cannot_run_say_why(tmp_path, monkeypatch):
     # A trained run folder is evaluated; a missing one says how to train it.
     sac = next(row for row in data["rows"] if row["label"] == "SAC / SAC (rLfD), mean action")
     assert "rlfd train --task peg --algo sac" in sac["ours"]["peg"]["reason"]
-    # A recipe run on some tasks only says which task it has no run on.
+    # A later stage names its command, which starts from the earlier stage's policy.
     longer = next(row for row in data["rows"] if "1,400 episodes, mean" in row["label"])
-    assert longer["ours"]["rj45"] == {
-        "status": "not run",
-        "reason": "no rlfd_ppo_std2_tt_1400 run on rj45",
-    }
     assert (
         "--init-from runs/gear_ppo_std2_so_tt_e700_s0/policy.zip"
         in (longer["ours"]["gear"]["reason"])
     )
+    assert (
+        "--force-limit-penalty 1 --init-from "
+        "runs/rj45_ppo_std2_so_torque005_pen1_tt_e700_s0/policy.zip"
+        in (longer["ours"]["rj45"]["reason"])
+    )
+    # A recipe run on some tasks only says which task it has no run on.
+    data = reproduce.reproduce_table("incremental", budget="quick", seed=0, workers=1)
+    longer = next(
+        row for row in data["rows"] if "incremental, 1,400 episodes, mean" in row["label"]
+    )
+    assert longer["ours"]["peg"] == {
+        "status": "not run",
+        "reason": "no rlfd_ppo_incremental_1400 run on models/tasks/variants/peg_incremental.yaml",
+    }
 
 
 def test_trained_run_folders_are_evaluated(tmp_path, monkeypatch):
