@@ -611,6 +611,11 @@ def evaluate(
                 check_residual_mode(policy_file(member), mode)
         elif part.endswith(".zip"):
             check_residual_mode(policy_file(part), mode)
+        elif part not in NAMED_POLICIES and not policy_file(part).is_file():
+            raise ValueError(
+                f"policy {part!r} is neither a named policy ({', '.join(NAMED_POLICIES)}) "
+                "nor a saved policy file"
+            )
     if noise_scale != 1.0:
         saved = [part for part in parts if part.endswith(".zip")]
         if not saved:

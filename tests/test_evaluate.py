@@ -234,6 +234,12 @@ def test_make_policy_from_spec_strings():
         make_policy("/nonexistent/model.zip")
 
 
+@pytest.mark.parametrize("spec", ["force_search_towards", "force_search|slop"])
+def test_an_unknown_policy_name_is_refused_before_any_episode(spec):
+    with pytest.raises(ValueError, match=r"is neither a named policy \(dmp, random, force_search"):
+        evaluate("gear", spec, episodes=2, seed=0, workers=2, progress=False)
+
+
 class _ResidualEnv(gym.Env):
     """Spaces of the residual: observation (26,), action (6,) in [-1, 1]."""
 
