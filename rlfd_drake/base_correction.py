@@ -58,6 +58,8 @@ def _slope(task: TaskSpec | None):
 #: a task.
 BASE_CORRECTIONS: dict[str, Callable[[TaskSpec | None], Callable[[np.ndarray], np.ndarray]]] = {
     "force_search": lambda task: ForceGuidedSearch(),
+    # Its mirror image, for a hole going onto a shaft (baselines/force_guided.py).
+    "force_search_toward": lambda task: ForceGuidedSearch(toward_pressure=True),
     "force_search_and_slope": _force_search_and_slope,
     # Only the constant turn that undoes the table's slope: no translation.
     "slope": _slope,

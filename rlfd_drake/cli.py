@@ -983,7 +983,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--base-correction",
-        choices=["force_search", "force_search_and_slope", "slope"],
+        choices=["force_search", "force_search_and_slope", "force_search_toward", "slope"],
         help="learn the residual on top of this hand-written rule (added to the "
         "learned action in training and in evaluations); default: none, the paper's rLfD",
     )

@@ -208,24 +208,18 @@ def make_policy(
                 "of a translation|orientation policy"
             )
         return kit.policy
-    if policy_spec in ("force_search", "force_search_toward", "slope", "fixture_oracle"):
+    if policy_spec in ("force_search", "force_search_toward", "slope"):
+        # The hand-written rules' one registry (also rlfd train's --base-correction).
+        from rlfd_drake.base_correction import make_base_correction
+
+        return make_base_correction(policy_spec, task)
+    if policy_spec == "fixture_oracle":
         from rlfd_drake.base_correction import check_offset_rule
+        from rlfd_drake.baselines.orientation_reference import fixture_rotation_residual
 
         check_offset_rule(policy_spec, task)
-    if policy_spec in ("force_search", "force_search_toward"):
-        from rlfd_drake.baselines.force_guided import ForceGuidedSearch
-
-        return ForceGuidedSearch(toward_pressure=policy_spec == "force_search_toward")
-    if policy_spec in ("slope", "fixture_oracle"):
-        from rlfd_drake.baselines.orientation_reference import (
-            fixture_rotation_residual,
-            slope_residual,
-        )
-
         if task is None:
             raise ValueError(f"{policy_spec}: a constant rotation reference needs the task")
-        if policy_spec == "slope":
-            return slope_residual(task)
         if fixture_dq is None:
             raise ValueError("fixture_oracle needs the episode's fixture error (rlfd evaluate)")
         return fixture_rotation_residual(task, fixture_dq)

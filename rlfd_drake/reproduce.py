@@ -443,6 +443,11 @@ _PPO_STD2_EXTRA = {
 _PPO_STD2_TAG = {"peg": "so_tt", "gear": "so_tt", "rj45": "so_torque005_pen1_tt"}
 
 
+def _ppo_std2_flags(task: str) -> str:
+    """Section 8's PPO flags with ``task``'s own ("peg", "gear" or "rj45")."""
+    return f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip()
+
+
 def _ppo_std2_run(
     path: str, task: str, episodes: int, tag: str = "", source: tuple[str, str] | None = None
 ):
@@ -455,7 +460,7 @@ def _ppo_std2_run(
     source is RJ-45's (the scale is in the copied networks;
     ``train.copy_policy_parameters`` refuses another). The recipe tag then says so:
     gear from RJ-45 "so_torque005_tt", RJ-45 from gear "so_pen1_tt"."""
-    flags, recipe_tag = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}", _PPO_STD2_TAG[task]
+    flags, recipe_tag = _ppo_std2_flags(task), _PPO_STD2_TAG[task]
     if source is not None:
         source_task, source_policy = source
         if not source_policy.endswith(".zip"):
@@ -478,8 +483,7 @@ RUNS["rlfd_ppo_std2_tt_1400"] = {
         RUNS["rlfd_ppo_std2_tt"][task][0].replace("_e700_s0", "_e700_then700_s0"),
         task,
         700,
-        f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA[task]}".strip()
-        + f" --init-from {RUNS['rlfd_ppo_std2_tt'][task][0]}/policy.zip",
+        f"{_ppo_std2_flags(task)} --init-from {RUNS['rlfd_ppo_std2_tt'][task][0]}/policy.zip",
         algo="ppo",
     )
     for task in _PHYSICAL
@@ -706,7 +710,7 @@ def _imitation_folder(path: str) -> str:
 def _add_imitation_runs(tasks: tuple[str, ...]) -> None:
     """RUNS["ppo_imitate_fs"] (the copy of the search, then 700 PPO episodes) and
     RUNS["ppo_imitate_fs_1400"] (700 more from it) on each RJ-45 task path."""
-    flags = f"{_PPO_STD2_FLAGS} {_PPO_STD2_EXTRA['rj45']}"
+    flags = _ppo_std2_flags("rj45")
     RUNS["ppo_imitate_fs"], RUNS["ppo_imitate_fs_1400"] = {}, {}
     for path in tasks:
         folder = _imitation_folder(path)

@@ -72,7 +72,6 @@ class ForceGuidedSearch:
         self.lift = float(lift)
         self.push = float(push)
         self.toward_pressure = bool(toward_pressure)
-        self._push_sign = -1.0 if toward_pressure else 1.0
         observer = observer if observer is not None else ObserverConfig()
         self._torque_scale = observer.torque_scale_Nm
         self._force_scale = observer.force_scale_N
@@ -91,7 +90,8 @@ class ForceGuidedSearch:
         across = np.array([-torque[1], torque[0]])
         size = float(np.linalg.norm(across))
         if size >= self.min_torque_nm:
-            action[0:2] = (self._push_sign * self.push / size) * across
+            push = -self.push if self.toward_pressure else self.push
+            action[0:2] = (push / size) * across
         return action
 
     def __repr__(self) -> str:
