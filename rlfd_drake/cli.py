@@ -270,6 +270,9 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     from rlfd_drake.tasks import load_task
 
     wall_start = time.perf_counter()
+    for name in ("episodes", "workers"):  # before the DMP is fitted, not after
+        if getattr(args, name) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(args, name)}")
     task = load_task(args.task)
     dmp_model = load_task_dmp(task)
     print(f"[1/4] fitted the DMP on {task.demo_path().name} ({task.name})")

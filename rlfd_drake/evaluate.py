@@ -55,6 +55,7 @@ from rlfd_drake.policies import (
     MeanOfPolicies,
     check_noise_scale,
     check_residual_mode,
+    existing_policy_file,
     load_sb3_model,
     policy_file,
     trained_base_correction,
@@ -602,9 +603,9 @@ def evaluate(
         if ENSEMBLE_SEPARATOR in part:
             # Checked here, not in a worker: a worker's error would respawn it.
             for member in ensemble_members(part, deterministic):
-                check_residual_mode(policy_file(member), mode)
+                check_residual_mode(existing_policy_file(member), mode)
         elif part.endswith(".zip"):
-            check_residual_mode(policy_file(part), mode)
+            check_residual_mode(existing_policy_file(part), mode)
         elif part not in NAMED_POLICIES and not policy_file(part).is_file():
             raise ValueError(
                 f"policy {part!r} is neither a named policy ({', '.join(NAMED_POLICIES)}) "

@@ -67,6 +67,15 @@ def policy_file(spec: str | Path) -> Path:
     return shipped_path(_split_spec(spec)[1])
 
 
+def existing_policy_file(spec: str | Path) -> Path:
+    """:func:`policy_file`, refused with a ValueError naming it if it is not a file."""
+    path = policy_file(spec)
+    if not path.is_file():
+        problem = "is a folder, not a saved policy" if path.is_dir() else "does not exist"
+        raise ValueError(f"policy file {str(path)!r} {problem}")
+    return path
+
+
 def load_sb3_model(spec: str | Path):
     """Loads a saved SB3 model from ``path`` or ``kind:path`` (kind in SB3_CLASSES).
 
@@ -76,15 +85,13 @@ def load_sb3_model(spec: str | Path):
     Raises:
         ValueError: no such file, or no SB3 class could load it.
     """
-    path = policy_file(spec)
+    path = existing_policy_file(spec)
     kind = _split_spec(spec)[0]
     if kind is not None:
         kinds = [kind]
     else:
-        detected = _sb3_kind_from_zip(path) if path.exists() else None
+        detected = _sb3_kind_from_zip(path)
         kinds = [detected] if detected else list(SB3_CLASSES)
-    if not path.exists():
-        raise ValueError(f"policy file {str(path)!r} does not exist")
     import importlib
 
     errors = []

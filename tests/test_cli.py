@@ -44,6 +44,9 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(SystemExit):
         main(["train", "--algo", "dqn"])
+    assert main(["demo", "--episodes", "0"]) == 2  # refused before the DMP is fitted
+    captured = capsys.readouterr()
+    assert "episodes must be >= 1, got 0" in captured.err and "[1/4]" not in captured.out
 
 
 def test_demo_record_refuses_to_overwrite(tmp_path, capsys):

@@ -240,6 +240,13 @@ def test_an_unknown_policy_name_is_refused_before_any_episode(spec):
         evaluate("gear", spec, episodes=2, seed=0, workers=2, progress=False)
 
 
+@pytest.mark.parametrize("spec", ["{missing}", "{missing}+{missing}", "dmp|{missing}"])
+def test_a_missing_policy_file_is_refused_before_any_episode(tmp_path, spec):
+    spec = spec.format(missing=tmp_path / "none.zip")
+    with pytest.raises(ValueError, match=r"policy file '.*none\.zip' does not exist"):
+        evaluate("gear", spec, episodes=2, seed=0, workers=2, progress=False)
+
+
 class _ResidualEnv(gym.Env):
     """Spaces of the residual: observation (26,), action (6,) in [-1, 1]."""
 
