@@ -410,6 +410,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         base_correction=args.base_correction,
         timeout_terminal=args.timeout_terminal,
         imitate=args.imitate,
+        privileged_critic=args.privileged_critic,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
@@ -1009,6 +1010,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--imitation-epochs", type=int, default=None, help="passes of the fit over them (100)"
+    )
+    train.add_argument(
+        "--privileged-critic",
+        action="store_true",
+        help="PPO's critic also reads the part's pose from the fixture's true goal and the "
+        "fixture's error (simulation only; an asymmetric actor-critic, a deviation); the "
+        "actor reads the observation alone, as it runs in the diagram",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

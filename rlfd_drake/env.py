@@ -53,6 +53,16 @@ ENV_IDS: dict[str, str] = {
 #: Keys ``reset(options=...)`` accepts.
 RESET_OPTIONS = ("start_dp", "start_dq", "fixture_dp", "fixture_dq", "perturbation_scale")
 
+#: Entries of :meth:`RlfdEnv.privileged_state`: what the simulator knows and the policy
+#: does not, for a learner's critic (``PrivilegedObservation``).
+PRIVILEGED_SIZE = 12
+#: Units of those entries (one unit each), chosen as ``observation_scaling``'s so that
+#: what matters in contact is of order one: the part's position from the true goal in
+#: the goal's frame (4 mm across, 2 cm along the insertion axis), its orientation
+#: error (rotation vector in the goal's frame, 0.05 rad), the fixture's calibration
+#: error (position 1 mm, rotation vector 1 deg).
+PRIVILEGED_UNITS = np.array([0.004, 0.004, 0.02] + [0.05] * 3 + [0.001] * 3 + [np.radians(1.0)] * 3)
+
 # The pure-RL baseline's dense reward (paper Sec. V-C): alpha, beta, eps.
 DENSE_ALPHA, DENSE_BETA, DENSE_EPS = 10.0, 0.002, 1e-4
 # The distance that one unit of the distance-shaping potential stands for.
@@ -519,6 +529,25 @@ class RlfdEnv(DrakeGymEnv):
         angle = X_WGoal.rotation().InvertAndCompose(X_WP.rotation()).ToAngleAxis().angle()
         return X_WP.translation() - X_WGoal.translation(), float(np.degrees(angle))
 
+    def privileged_state(self) -> np.ndarray:
+        """(PRIVILEGED_SIZE,) float32 in ``PRIVILEGED_UNITS``: the part's pose relative to
+        the fixture's *true* goal, in the goal's frame, and the fixture's calibration
+        error of this episode. Not part of the observation (the paper's policy does not
+        know the fixture's error); for a critic trained in simulation only."""
+        plant = self.rlfd.scene.plant
+        plant_context = plant.GetMyContextFromRoot(self.simulator.get_context())
+        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context)
+        X_GoalP = self.rlfd.scene.X_WGoal.InvertAndCompose(X_WP)
+        state = np.concatenate(
+            [
+                X_GoalP.translation(),
+                rotation_vector_from_quat(X_GoalP.rotation().ToQuaternion().wxyz()),
+                self.setup.fixture_dp,
+                rotation_vector_from_quat(self.setup.fixture_dq),
+            ]
+        )
+        return (state / PRIVILEGED_UNITS).astype(np.float32)
+
     def _inserted(self) -> bool:
         """Within kappa of the goal, and within kappa_deg of its orientation when the
         task asks for it (RJ-45: a plug upside down is not inserted)."""
@@ -577,6 +606,34 @@ class TimeLimitAsTerminal(gym.Wrapper):
     def step(self, action):
         observation, reward, terminated, truncated, info = self.env.step(action)
         return observation, reward, terminated or truncated, False, info
+
+
+class PrivilegedObservation(gym.Wrapper):
+    """An RlfdEnv whose observation has ``privileged_state()`` appended (26 + 12): an
+    asymmetric actor-critic's input (Pinto et al., "Asymmetric Actor Critic for
+    Image-Based Robot Learning", RSS 2018), whose critic reads the true state in
+    simulation while its actor reads only the first 26 entries, so that the trained
+    actor runs on the robot's observation alone (``privileged_critic``). Outermost:
+    the wrappers inside it (a base correction's rule) see the plain observation."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        size = int(env.observation_space.shape[0])
+        self.observation_space = gym.spaces.Box(
+            -np.inf, np.inf, (size + PRIVILEGED_SIZE,), np.float32
+        )
+
+    def _with_privileged(self, observation: np.ndarray) -> np.ndarray:
+        privileged = self.env.unwrapped.privileged_state()
+        return np.concatenate([np.asarray(observation, np.float32), privileged])
+
+    def reset(self, **kwargs):
+        observation, info = self.env.reset(**kwargs)
+        return self._with_privileged(observation), info
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        return self._with_privileged(observation), reward, terminated, truncated, info
 
 
 def register_envs() -> None:

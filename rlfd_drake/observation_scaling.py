@@ -63,27 +63,42 @@ class ScaledObservation(BaseFeaturesExtractor):
     """Multiplies each observation entry by a fixed scale (no trainable parameters).
 
     Works on a frame-stacked observation (``VecFrameStack``: newest last) by repeating
-    the per-step scales over the stack.
+    the per-step scales over the stack. ``privileged_size`` entries appended after the
+    stack (``env.PrivilegedObservation``, for a critic) keep their units, or are
+    zeroed with ``hide_privileged`` (the actor's reading of the same observation).
 
     Raises:
-        ValueError: the space is not a flat Box whose size is a multiple of the scales',
-            or a scale is not a positive finite number.
+        ValueError: the space is not a flat Box whose size less ``privileged_size`` is a
+            multiple of the scales', or a scale is not a positive finite number.
     """
 
-    def __init__(self, observation_space: gym.spaces.Box, scales=CONTACT_SCALES):
+    def __init__(
+        self,
+        observation_space: gym.spaces.Box,
+        scales=CONTACT_SCALES,
+        privileged_size: int = 0,
+        hide_privileged: bool = False,
+    ):
         if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
             raise ValueError(f"observation_space must be a flat Box, got {observation_space}")
         size = int(observation_space.shape[0])
+        if not (isinstance(privileged_size, int) and 0 <= privileged_size < size):
+            raise ValueError(
+                f"privileged_size must be an integer in [0, {size}), got {privileged_size!r}"
+            )
+        stacked = size - privileged_size
         per_step = np.asarray(scales, dtype=np.float32).reshape(-1)
-        if per_step.size != OBSERVATION_SIZE or size % per_step.size:
+        if per_step.size != OBSERVATION_SIZE or stacked % per_step.size:
             raise ValueError(
                 f"scales must have {OBSERVATION_SIZE} entries dividing the observation "
-                f"size {size}, got {per_step.size}"
+                f"size {stacked}, got {per_step.size}"
             )
         if not (np.all(np.isfinite(per_step)) and np.all(per_step > 0)):
             raise ValueError(f"scales must be positive finite numbers, got {per_step.tolist()}")
         super().__init__(observation_space, features_dim=size)
-        self.register_buffer("scales", torch.as_tensor(np.tile(per_step, size // per_step.size)))
+        tail = np.full(privileged_size, 0.0 if hide_privileged else 1.0, np.float32)
+        all_scales = np.concatenate([np.tile(per_step, stacked // per_step.size), tail])
+        self.register_buffer("scales", torch.as_tensor(all_scales))
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         return observations.flatten(start_dim=1) * self.scales

@@ -49,7 +49,7 @@ def _sb3_kind_from_zip(path: Path) -> str | None:
         return "sac"
     if ".td3." in module:
         return "td3"
-    if module == "stable_baselines3.common.policies":
+    if module in ("stable_baselines3.common.policies", "rlfd_drake.privileged_critic"):
         return "ppo"
     return None
 
@@ -250,7 +250,11 @@ class DeployedPolicy:
         noise_scale: float = 1.0,
     ):
         check_noise_scale(noise_scale)
-        stacked = int(model.observation_space.shape[0])
+        model_size = int(model.observation_space.shape[0])
+        # A privileged critic's model (privileged_critic.py) takes entries that the
+        # diagram does not observe and its actor does not read: they are padded zeros.
+        stacked = int(getattr(model.policy, "actor_observation_size", model_size))
+        self._privileged_padding = np.zeros(model_size - stacked, dtype=np.float32)
         if stacked % observation_size:
             raise ValueError(
                 f"the model's observation size {stacked} is not a multiple of the "
@@ -289,6 +293,9 @@ class DeployedPolicy:
         obs = np.asarray(observation, dtype=np.float32)
         self._stack = np.roll(self._stack, -self.observation_size)
         self._stack[-self.observation_size :] = obs
+        model_input = self._stack
+        if self._privileged_padding.size:
+            model_input = np.concatenate([self._stack, self._privileged_padding])
         if self._recurrent:
             action, self._lstm_state = self.model.predict(
                 self._stack[None],
@@ -298,9 +305,9 @@ class DeployedPolicy:
             )
             self._episode_start = np.zeros((1,), dtype=bool)
         elif self._scaled_sampling:
-            action = self._sample_scaled(self._stack)
+            action = self._sample_scaled(model_input)
         else:
-            action, _ = self.model.predict(self._stack, deterministic=self.deterministic)
+            action, _ = self.model.predict(model_input, deterministic=self.deterministic)
         action = np.asarray(action, dtype=float).reshape(-1)
         if action.size == 3 and self.residual_mode in RESIDUAL_PARTS:
             return pad_residual_part(action, self.residual_mode)

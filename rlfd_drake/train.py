@@ -49,7 +49,9 @@ from rlfd_drake.control_math import RESIDUAL_PARTS
 from rlfd_drake.diagram import COMPOSITIONS
 from rlfd_drake.env import (
     ENV_IDS,
+    PRIVILEGED_SIZE,
     AppliedResidualAction,
+    PrivilegedObservation,
     RlfdEnv,
     TimeLimitAsTerminal,
     check_reward_terms,
@@ -61,6 +63,7 @@ from rlfd_drake.observation_scaling import (
     contact_scales,
 )
 from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
+from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
 from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
@@ -214,6 +217,11 @@ class TrainConfig:
             (``base_correction.RateTrackingRule``). None = RL from the zero residual
             (the paper's rLfD).
         imitation_episodes, imitation_epochs: the rule's episodes and the fit's passes.
+        privileged_critic: PPO's critic also reads the part's pose from the fixture's
+            true goal and the fixture's error (``env.PrivilegedObservation``,
+            ``privileged_critic.PrivilegedCriticPolicy``: an asymmetric actor-critic,
+            Pinto et al. 2018), its actor only the observation, as it runs in the
+            diagram; False = the paper's PPO, whose critic reads what the actor reads.
     """
 
     task: str = "peg_easy"
@@ -258,6 +266,7 @@ class TrainConfig:
     imitate: str | None = None
     imitation_episodes: int = 100
     imitation_epochs: int = 100
+    privileged_critic: bool = False
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -362,6 +371,8 @@ class TrainConfig:
             )
         if self.imitate is not None:
             self._check_imitation()
+        if self.privileged_critic:
+            self._check_privileged_critic()
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -372,6 +383,23 @@ class TrainConfig:
             DISCOUNT,
             self.distance_shaping_axes,
         )
+
+    def _check_privileged_critic(self) -> None:
+        """ValueError naming the setting that a privileged critic cannot go with."""
+        conflicts = {
+            "algo": (self.algo != "ppo", f"{self.algo!r} (it is PPO's actor-critic)"),
+            "init_from": (
+                self.init_from is not None,
+                "set (a source's critic did not read the privileged entries)",
+            ),
+            "imitate": (
+                self.imitate is not None,
+                "set (the copy's value is fitted on the observation alone)",
+            ),
+        }
+        for name, (bad, why) in conflicts.items():
+            if bad:
+                raise ValueError(f"privileged_critic cannot go with {name} {why}")
 
     def _check_imitation(self) -> None:
         """ValueError naming the setting that imitation of a rule cannot go with."""
@@ -423,16 +451,19 @@ def wrap_training_env(
     applied_action_only: bool,
     base_correction: str | None,
     timeout_terminal: bool = False,
+    privileged_critic: bool = False,
 ):
     """An RlfdEnv as the learner sees it: its time limit terminal if asked, its action
     added to the base correction's (on the 6-D residual), then only the applied 3-D
-    part if asked."""
+    part if asked, and the privileged entries appended for a privileged critic."""
     if timeout_terminal:
         env = TimeLimitAsTerminal(env)
     if base_correction is not None:
         env = BaseCorrectedAction(env, base_correction, learned_mode=residual_mode)
     if applied_action_only:
         env = AppliedResidualAction(env, residual_mode)
+    if privileged_critic:
+        env = PrivilegedObservation(env)
     return env
 
 
@@ -447,6 +478,7 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
             "applied_action_only": config.applied_action_only,
             "base_correction": config.base_correction,
             "timeout_terminal": config.timeout_terminal,
+            "privileged_critic": config.privileged_critic,
         },
     )
     venv = make_vec_env(
@@ -543,15 +575,20 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
         device="cpu",
     )
     if config.algo == "ppo":
+        policy, reading = "MlpPolicy", inputs
+        if config.privileged_critic:
+            scales = inputs.get("features_extractor_kwargs", {}).get("scales")
+            policy = PrivilegedCriticPolicy
+            reading = dict(privileged_size=PRIVILEGED_SIZE, observation_scales=scales)
         model = PPO(
-            "MlpPolicy",
+            policy,
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             n_epochs=10,
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
             gamma=DISCOUNT,
-            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **inputs),
+            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **reading),
             **common,
         )
     elif config.algo == "sac":

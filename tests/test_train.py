@@ -750,3 +750,59 @@ def test_learning_without_tensorboard_leaves_no_folder_behind(tmp_path, monkeypa
         model.learn(total_timesteps=16)
         assert model._n_updates > 0
     assert list(tmp_path.iterdir()) == []
+
+
+def test_privileged_critic_trains_a_critic_that_reads_what_the_actor_cannot(tmp_path):
+    from rlfd_drake.env import PRIVILEGED_SIZE
+    from rlfd_drake.policies import DeployedPolicy
+    from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
+    from rlfd_drake.train import make_envs
+
+    config = TrainConfig(
+        algo="ppo", envs=1, ppo_n_steps=16, scaled_observation=True, privileged_critic=True
+    )
+    venv = make_envs(config, 1, seed=0)
+    assert venv.observation_space.shape == (26 + PRIVILEGED_SIZE,)
+    observation = venv.reset()
+    # The appended entries are the episode's: its fixture error, in 1 mm units.
+    fixture_dp = venv.get_attr("setup")[0].fixture_dp
+    np.testing.assert_allclose(observation[0, 32:35], fixture_dp / 0.001, rtol=1e-5, atol=1e-5)
+    model = make_model(config, venv, None)
+    assert isinstance(model.policy, PrivilegedCriticPolicy)
+    before = _parameters(model)
+    model.learn(total_timesteps=32)  # two updates
+    assert _changed(before, model)
+    # The actor ignores the privileged entries, the critic does not.
+    rng = np.random.default_rng(2)
+    obs = rng.normal(size=(4, 26 + PRIVILEGED_SIZE)).astype(np.float32)
+    other = obs.copy()
+    other[:, 26:] = rng.normal(size=(4, PRIVILEGED_SIZE))
+    policy = model.policy
+    with torch.no_grad():
+        means = [
+            policy.get_distribution(policy.obs_to_tensor(o)[0]).distribution.mean
+            for o in (obs, other)
+        ]
+        values = [policy.predict_values(policy.obs_to_tensor(o)[0]) for o in (obs, other)]
+    torch.testing.assert_close(means[0], means[1], rtol=0, atol=0)
+    assert not torch.equal(values[0], values[1])
+    # Saved and loaded, it deploys on the diagram's 26 entries alone.
+    model.save(tmp_path / "policy.zip")
+    loaded = load_model(tmp_path / "policy.zip")
+    assert isinstance(loaded.policy, PrivilegedCriticPolicy)
+    deployed = DeployedPolicy(loaded)
+    expected, _ = loaded.predict(obs[0], deterministic=True)
+    np.testing.assert_allclose(deployed(obs[0, :26]), expected, rtol=0, atol=1e-7)
+    venv.close()
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"algo": "sac"}, "privileged_critic cannot go with algo 'sac'"),
+        ({"imitate": "force_search"}, "privileged_critic cannot go with imitate"),
+    ],
+)
+def test_privileged_critic_is_refused_where_it_cannot_apply(fields, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(privileged_critic=True, **fields)
