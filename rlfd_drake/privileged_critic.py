@@ -18,6 +18,9 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from rlfd_drake.observation_scaling import ScaledObservation
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
 
+#: ActorCriticPolicy's arguments that PrivilegedCriticPolicy sets itself.
+_SET_HERE = ("share_features_extractor", "features_extractor_class", "features_extractor_kwargs")
+
 
 class PrivilegedCriticPolicy(ActorCriticPolicy):
     """An MLP actor-critic with separate input layers: the critic's reads the whole
@@ -42,7 +45,7 @@ class PrivilegedCriticPolicy(ActorCriticPolicy):
     ):
         if not (isinstance(privileged_size, int) and privileged_size >= 1):
             raise ValueError(f"privileged_size must be an integer >= 1, got {privileged_size!r}")
-        for name in ("share_features_extractor", "features_extractor_class"):
+        for name in _SET_HERE:
             if name in kwargs:
                 raise ValueError(f"{name} is set by PrivilegedCriticPolicy, got {kwargs[name]!r}")
         scales = (
@@ -72,9 +75,8 @@ class PrivilegedCriticPolicy(ActorCriticPolicy):
 
     def _get_constructor_parameters(self) -> dict:
         data = super()._get_constructor_parameters()
-        for name in ("share_features_extractor", "features_extractor_class"):
+        for name in _SET_HERE:
             data.pop(name, None)
-        data.pop("features_extractor_kwargs", None)
         data.update(
             privileged_size=self.privileged_size, observation_scales=self.observation_scales
         )

@@ -397,9 +397,7 @@ class TrainConfig:
                 "set (the copy's value is fitted on the observation alone)",
             ),
         }
-        for name, (bad, why) in conflicts.items():
-            if bad:
-                raise ValueError(f"privileged_critic cannot go with {name} {why}")
+        _refuse_conflicts("privileged_critic", conflicts)
 
     def _check_imitation(self) -> None:
         """ValueError naming the setting that imitation of a rule cannot go with."""
@@ -420,9 +418,15 @@ class TrainConfig:
             ),
             "composition": (self.composition != "residual", f"{self.composition!r}"),
         }
-        for name, (bad, why) in conflicts.items():
-            if bad:
-                raise ValueError(f"imitate={self.imitate!r} cannot go with {name} {why}")
+        _refuse_conflicts(f"imitate={self.imitate!r}", conflicts)
+
+
+def _refuse_conflicts(setting: str, conflicts: dict[str, tuple[bool, str]]) -> None:
+    """ValueError "<setting> cannot go with <name> <why>" for the first conflict that
+    holds (``conflicts``: name -> (holds, why))."""
+    for name, (holds, why) in conflicts.items():
+        if holds:
+            raise ValueError(f"{setting} cannot go with {name} {why}")
 
 
 def _env_kwargs(config: TrainConfig) -> dict:
@@ -558,12 +562,12 @@ def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
 def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
     """A new SB3 model with the paper's architecture where it states one, logging to
     TensorBoard in ``tensorboard_dir``, or nowhere (and writing no files) for None."""
+    scales = contact_scales(config.contact_torque_nm) if config.scaled_observation else None
     inputs = (
         dict(
-            features_extractor_class=ScaledObservation,
-            features_extractor_kwargs={"scales": contact_scales(config.contact_torque_nm)},
+            features_extractor_class=ScaledObservation, features_extractor_kwargs={"scales": scales}
         )
-        if config.scaled_observation
+        if scales is not None
         else {}
     )
     common = dict(
@@ -576,8 +580,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
     )
     if config.algo == "ppo":
         policy, reading = "MlpPolicy", inputs
-        if config.privileged_critic:
-            scales = inputs.get("features_extractor_kwargs", {}).get("scales")
+        if config.privileged_critic:  # its own two input layers, with these scales
             policy = PrivilegedCriticPolicy
             reading = dict(privileged_size=PRIVILEGED_SIZE, observation_scales=scales)
         model = PPO(
