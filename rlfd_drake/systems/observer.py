@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -178,10 +179,10 @@ class Observer(LeafSystem):
         total = 0.0
         for i in range(contact_results.num_hydroelastic_contacts()):
             f = contact_results.hydroelastic_contact_info(i).F_Ac_W().translational()
-            total += float(np.sqrt(f @ f))
+            total += math.sqrt(f @ f)
         for i in range(contact_results.num_point_pair_contacts()):
             f = contact_results.point_pair_contact_info(i).contact_force()
-            total += float(np.sqrt(f @ f))
+            total += math.sqrt(f @ f)
         return total
 
     # -- discrete update ------------------------------------------------------------
@@ -189,7 +190,8 @@ class Observer(LeafSystem):
         x = context.get_discrete_state(0).get_value()
         # EvalAbstract: the results by reference, not copied into Python (500 Hz).
         force = self.TotalContactForce(self._contacts.EvalAbstract(context).get_value())
-        tau = float(np.max(np.abs(self._tau_contact.Eval(context))))
+        # Python's max over 7 floats: a third of numpy's max(abs()) at 500 Hz.
+        tau = max(map(abs, self._tau_contact.Eval(context).tolist()))
         # Each event writes its own entries only: when both fire at once, Drake hands
         # them the same copy of the state.
         new = discrete_state.get_mutable_value(0)
