@@ -182,7 +182,11 @@ def seed_study(
             "seed": run.seed,
             "folder": str(run.folder),
             "training_episodes": run.metrics.get("episodes"),
-            "training_wall_time_s": run.metrics.get("wall_time_s"),
+            # A resumed run's metrics time its last process only: not the run's time.
+            "training_wall_time_s": (
+                None if "resumed_at_episode" in run.metrics else run.metrics.get("wall_time_s")
+            ),
+            "training_resumed_at_episode": run.metrics.get("resumed_at_episode"),
             "success": {},
             "evaluations": {},
             # A policy chosen among the run's checkpoints (rlfd select): its record.
@@ -242,6 +246,11 @@ def seed_study(
     return data
 
 
+def _unknown_wall(resumed_at_episode: int | None) -> str:
+    """The wall-clock cell of a run whose time is not known."""
+    return "-" if resumed_at_episode is None else f"- (resumed at episode {resumed_at_episode})"
+
+
 def _selection_lines(per_seed: list[dict]) -> list[str]:
     """Where each seed's policy was chosen among its checkpoints (``rlfd select``), if
     any was: the episodes column is then the chosen checkpoint's."""
@@ -280,7 +289,7 @@ def seed_study_markdown(data: dict) -> str:
         cells = [
             str(row["seed"]),
             str(row["training_episodes"]),
-            f"{wall:.0f}" if wall else "-",
+            f"{wall:.0f}" if wall else _unknown_wall(row.get("training_resumed_at_episode")),
             *[f"{row['success'][column]:.1f}" for column in columns],
         ]
         if targets:

@@ -8,7 +8,8 @@ A run folder holds everything needed to understand and resume a run:
     runs/<name>/episodes.csv   one line per training episode (success, return, length)
     runs/<name>/eval/          periodic evaluation (EvalCallback)
     runs/<name>/policy.zip     the final policy (SB3 format)
-    runs/<name>/metrics.json   episodes, steps, wall-clock time, success over training
+    runs/<name>/metrics.json   episodes, steps, wall-clock time (of the last process, if
+                               resumed: resumed_at_episode says so), success over training
 
 Residual policies start at zero output (the last layer of the actor's mean is zero),
 so an untrained residual is the DMP alone.
@@ -700,6 +701,12 @@ def _describe_reading(scales: torch.Tensor | None) -> str:
     return f"scaled, wrist torque {per_unit:g} N m per unit"
 
 
+def _logged_successes(episodes_csv: Path) -> list[int]:
+    """The success column of a run's episodes.csv, every episode it logged."""
+    with episodes_csv.open(newline="") as f:
+        return [int(row["success"]) for row in csv.DictReader(f)]
+
+
 def load_model(path: str | Path) -> BaseAlgorithm:
     """Loads a saved policy of any of our algorithms (see ``policies.load_sb3_model``)."""
     return load_sb3_model(path)[0]
@@ -921,17 +928,25 @@ def train(
     model.save(str(run_dir / "policy.zip"))
     venv.close()
     log = callbacks[0]
+    # Over the whole run: a resumed process saw only its own episodes.
+    successes = _logged_successes(episodes_csv)
     metrics = {
         "episodes": log.episodes,
         "timesteps": int(model.num_timesteps),
         "wall_time_s": wall,
-        "success_rate_last_50": float(np.mean(log.successes[-50:])) if log.successes else 0.0,
-        "success_rate_all": float(np.mean(log.successes)) if log.successes else 0.0,
+        "success_rate_last_50": float(np.mean(successes[-50:])) if successes else 0.0,
+        "success_rate_all": float(np.mean(successes)) if successes else 0.0,
         # A fine-tune whose episodes end before SAC's learning starts never updates: the
         # saved policy is then the copied one, and this says so.
         "gradient_updates": int(getattr(model, "_n_updates", 0)),
         "date": utc_now(),  # when training finished
     }
+    if checkpoint is not None:
+        # The earlier processes' time is not known (they were stopped before writing
+        # metrics), so the wall time is this process's and says so.
+        metrics["resumed_at_episode"] = episodes_done
+        metrics["resumed_from_checkpoint"] = checkpoint.name
+        metrics["wall_time_s_covers"] = f"the resumed part only (episodes {episodes_done + 1}-)"
     # Read back from the file: a resumed run did its imitation in an earlier process.
     if (run_dir / "imitation.json").is_file():
         metrics["imitation"] = json.loads((run_dir / "imitation.json").read_text())

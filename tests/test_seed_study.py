@@ -97,6 +97,13 @@ def test_study_reuses_stored_evaluations_and_reports_the_spread(tmp_path, monkey
     seed_study(folders, ["peg_hard"], actions=("mean",), name="recipe_selected")
     chosen = (tmp_path / "results" / "seeds_recipe_selected.md").read_text()
     assert f"seed 2: `{record}`" in chosen and "seed 0: `the final policy`" in chosen
+    # A resumed run timed its last process only: no wall-clock, and the table says why.
+    metrics = json.loads((folders[1] / "metrics.json").read_text())
+    (folders[1] / "metrics.json").write_text(json.dumps({**metrics, "resumed_at_episode": 606}))
+    resumed = seed_study(folders, ["peg_hard"], actions=("mean",), name="recipe_resumed")
+    assert resumed["training_wall_time_s"]["mean"] == pytest.approx(1001.5)  # seeds 1, 2
+    table = (tmp_path / "results" / "seeds_recipe_resumed.md").read_text()
+    assert "| 0 | 700 | - (resumed at episode 606) |" in table
 
 
 def test_study_refuses_runs_of_different_recipes_or_repeated_seeds(tmp_path, monkeypatch):

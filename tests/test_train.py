@@ -107,7 +107,13 @@ def test_train_writes_a_run_folder_and_refuses_to_overwrite(tmp_path):
     with pytest.raises(FileExistsError, match="already holds a run"):
         train(config, run, progress_bar=False)
     # Resuming compares the configuration as saved (JSON: tuple fields come back lists).
-    assert train(config, run, resume=True, progress_bar=False)["episodes"] == 1
+    resumed = train(config, run, resume=True, progress_bar=False)
+    assert resumed["episodes"] == 1
+    # Its metrics say that the wall time is the resumed part's, and rate the whole log.
+    assert resumed["resumed_at_episode"] == 1
+    assert resumed["resumed_from_checkpoint"].startswith("policy_")
+    logged = (run / "episodes.csv").read_text().splitlines()[1:]
+    assert resumed["success_rate_all"] == np.mean([int(line.split(",")[2]) for line in logged])
     with pytest.raises(ValueError, match="--resume with a different configuration"):
         train(replace(config, ppo_n_steps=16), run, resume=True, progress_bar=False)
 
