@@ -66,6 +66,7 @@ from rlfd_drake.observation_scaling import (
 from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
 from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
 from rlfd_drake.results import format_json, invoked_command, utc_now
+from rlfd_drake.run_log import read_episode_log
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
 
@@ -701,12 +702,6 @@ def _describe_reading(scales: torch.Tensor | None) -> str:
     return f"scaled, wrist torque {per_unit:g} N m per unit"
 
 
-def _logged_successes(episodes_csv: Path) -> list[int]:
-    """The success column of a run's episodes.csv, every episode it logged."""
-    with episodes_csv.open(newline="") as f:
-        return [int(row["success"]) for row in csv.DictReader(f)]
-
-
 def load_model(path: str | Path) -> BaseAlgorithm:
     """Loads a saved policy of any of our algorithms (see ``policies.load_sb3_model``)."""
     return load_sb3_model(path)[0]
@@ -929,7 +924,9 @@ def train(
     venv.close()
     log = callbacks[0]
     # Over the whole run: a resumed process saw only its own episodes.
-    successes = _logged_successes(episodes_csv)
+    successes = [
+        int(row["success"]) for row in csv.DictReader(read_episode_log(run_dir).splitlines())
+    ]
     metrics = {
         "episodes": log.episodes,
         "timesteps": int(model.num_timesteps),
