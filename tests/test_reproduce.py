@@ -267,12 +267,14 @@ def test_tables_trained_together_train_each_missing_run_once_in_parallel(tmp_pat
     }
     assert needed <= set(trained) <= {run[0] for k in keys for run in reproduce.RUNS[k].values()}
     for number, data in zip(numbers, tables, strict=True):
-        for row in data["rows"]:
+        for row, defined in zip(data["rows"], reproduce.TABLES[number].rows, strict=True):
             if row["source"].startswith("run:"):
                 key = row["source"].removeprefix("run:")
                 for column, cell in row["ours"].items():
                     task = reproduce.TABLES[number].columns[column]
-                    assert (cell["status"] == "measured") == (task in reproduce.RUNS[key])
+                    # The quick budget leaves sampled actions to stored evaluations.
+                    measured = task in reproduce.RUNS[key] and not defined.stochastic
+                    assert (cell["status"] == "measured") == measured
     with pytest.raises(ValueError, match="parallel runs must be an integer >= 1, got 0"):
         reproduce.reproduce_tables(numbers, train_missing=True, parallel_runs=0)
 
@@ -560,8 +562,10 @@ def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp
     gear = rows["SAC / SAC (rLfD), mean action"]["gear"]
     assert gear["status"] == "measured" and gear["training_episodes"] == 300
     assert gear["success_pct"] == pytest.approx(90.0)
+    peg = rows["SAC / SAC (rLfD), mean action"]["peg"]
+    assert peg["status"] == "not run" and "rlfd train --task peg" in peg["reason"]
     sampled = rows["SAC / SAC (rLfD), sampled actions"]["gear"]
-    assert sampled["status"] == "not run" and "rlfd train --task gear" in sampled["reason"]
+    assert sampled == {"status": "not run", "reason": reproduce.PAPER_BUDGET_ONLY_REASON}
     assert not [policy for policy in evaluated if "sac_te1" in policy]
 
 
@@ -580,12 +584,51 @@ def test_named_policies_are_evaluated_by_name(tmp_path, monkeypatch, table, colu
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
     )
-    data = reproduce.reproduce_table(table, budget="quick", seed=0, workers=1)
+    # The paper does not have the reference: only the paper budget evaluates it anew.
+    data = reproduce.reproduce_table(table, budget="paper", seed=0, workers=1)
     tasks = reproduce.TABLES[table].columns
     assert all((tasks[column], "force_search") in asked for column in columns)
     row = next(r for r in data["rows"] if r["label"].startswith("Force-guided search"))
     assert all(row["ours"][column]["success_pct"] == pytest.approx(70.0) for column in columns)
     assert "not in the paper" in (tmp_path / "results" / f"table_{table}.md").read_text()
+
+
+def test_the_quick_budget_shows_rows_the_paper_lacks_only_from_stored_evaluations(
+    tmp_path, monkeypatch
+):
+    """Quick budget: a sampled-action row, a reference or an earlier policy is read from a
+    stored evaluation of its name and never evaluated anew (nor its baseline trained);
+    the paper's rows are evaluated as before."""
+    monkeypatch.chdir(tmp_path)
+    asked = []
+    stored = {"eval_peg_easy_force_search_n40_s0"}
+
+    def recording_evaluation(task, policy, name, *args, available=True, **kwargs):
+        asked.append((name, available))
+        return _fake_evaluation(
+            task, policy, name, *args, available=available or name in stored, **kwargs
+        )
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", recording_evaluation)
+    monkeypatch.setattr(
+        reproduce, "_baseline_run", lambda *a, **k: tmp_path / "runs" / "x" / "baseline.npz"
+    )
+    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
+    rows = {row["label"]: row["ours"] for row in data["rows"]}
+    search = rows["Force-guided search (hand-written reference)"]
+    assert search["easy"]["status"] == "measured"  # stored
+    assert search["hard"] == {"status": "not run", "reason": reproduce.PAPER_BUDGET_ONLY_REASON}
+    sampled = rows["rLfD PPO (shipped), sampled actions"]
+    assert all(cell["status"] == "not run" for cell in sampled.values())
+    assert rows["rLfD PPO (shipped), mean action"]["hard"]["status"] == "measured"
+    assert rows["Random"]["hard"]["status"] == "measured"
+    # Those rows only looked for a stored file; the paper's rows were evaluated.
+    looked = dict(asked)
+    assert looked["eval_peg_hard_force_search_n40_s0"] is False
+    assert looked["eval_peg_hard_random_n40_s0"] is True
+    assert reproduce.paper_budget_only(reproduce.TABLES["1"].rows[6], "quick")
+    assert not reproduce.paper_budget_only(reproduce.TABLES["1"].rows[6], "paper")
+    assert not reproduce.paper_budget_only(reproduce.TABLES["1"].rows[0], "quick")
 
 
 def test_the_shipped_full_pose_row_runs_each_policy_on_the_task_it_was_trained_on(
