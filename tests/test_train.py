@@ -812,3 +812,29 @@ def test_privileged_critic_trains_a_critic_that_reads_what_the_actor_cannot(tmp_
 def test_privileged_critic_is_refused_where_it_cannot_apply(fields, message):
     with pytest.raises(ValueError, match=message):
         TrainConfig(privileged_critic=True, **fields)
+
+
+@pytest.mark.parametrize("curriculum", [True, False])
+def test_curriculum_grows_the_start_perturbation_over_the_first_half_of_training(
+    tmp_path, curriculum
+):
+    """``--curriculum``: each env's start offsets are scaled from ``curriculum_start`` up
+    to 1 over the first half of the run's episodes, then kept at 1 (the paper's PPO
+    recipe on the physical robot); without it the envs are never told a scale."""
+    from types import SimpleNamespace
+
+    from rlfd_drake.train import EpisodeLog
+
+    config = TrainConfig(task="peg_easy", episodes=10, curriculum=curriculum, curriculum_start=0.2)
+    log = EpisodeLog(config, tmp_path / "episodes.csv")
+    told = []
+    envs = SimpleNamespace(env_method=lambda name, value: told.append((name, value)))
+    log.model = SimpleNamespace(logger=Logger(None, []), get_env=lambda: envs)
+    for finished in (0, 2, 5, 8):
+        log.episodes = finished
+        log._apply_curriculum()
+    if not curriculum:
+        assert told == []
+        return
+    assert [name for name, _ in told] == ["set_perturbation_scale"] * 4
+    assert [value for _, value in told] == pytest.approx([0.2, 0.52, 1.0, 1.0])
