@@ -828,7 +828,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--residual-mode", choices=["full", "translation", "orientation"], default="full"
     )
     train.add_argument("--reward", choices=["sparse", "dense"], default="sparse")
-    train.add_argument("--curriculum", action="store_true", help="grow the start perturbation")
+    train.add_argument(
+        "--curriculum",
+        action="store_true",
+        help="scale the start offsets from 0.25 up to 1 over the first half of the run's "
+        "episodes (the paper's PPO recipe on the physical robot; the fixture error is not "
+        "scaled)",
+    )
     train.add_argument(
         "--eval-every",
         type=int,
