@@ -19,8 +19,6 @@ of every candidate's validation success and forces goes to
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import shutil
 import time
@@ -29,7 +27,7 @@ from pathlib import Path
 
 from rlfd_drake.policies import checkpoint_steps
 from rlfd_drake.results import format_json, new_result_path, results_dir, write_result
-from rlfd_drake.run_log import read_episode_log
+from rlfd_drake.run_log import read_episode_log, read_episode_rows
 
 __all__ = [
     "Candidate",
@@ -52,8 +50,7 @@ class Candidate:
 
 def _episodes_by_steps(run_dir: Path) -> list[tuple[int, int]]:
     """(episode, timesteps at its end) of each finished training episode."""
-    rows = csv.DictReader(io.StringIO(read_episode_log(run_dir)))
-    return [(int(row["episode"]), int(row["timesteps"])) for row in rows]
+    return [(int(row["episode"]), int(row["timesteps"])) for row in read_episode_rows(run_dir)]
 
 
 def run_candidates(run_dir: str | Path, from_episode: int = 0) -> list[Candidate]:

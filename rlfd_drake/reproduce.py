@@ -1995,12 +1995,12 @@ def _cell(
         )
 
     # A stored evaluation is reused even where the policy is not on this machine.
-    if paper_budget_only(row, budget):
-        result = evaluation(False)
-        if result is None:
-            return {"status": "not run", "reason": PAPER_BUDGET_ONLY_REASON}, None
-    else:
-        result = evaluation(missing is None or Path(policy.split("|")[0]).exists())
+    only_stored = paper_budget_only(row, budget)
+    result = evaluation(
+        not only_stored and (missing is None or Path(policy.split("|")[0]).exists())
+    )
+    if result is None and only_stored:
+        return {"status": "not run", "reason": PAPER_BUDGET_ONLY_REASON}, None
     if result is None and kind == "baseline":
         _baseline_run(detail, train_task, row.residual_mode, train_episodes, seed, workers)
         result = evaluation(True)

@@ -10,13 +10,21 @@ line per episode, about a fifth of the bytes compressed), where ``rlfd seeds`` a
 
 from __future__ import annotations
 
+import csv
 import gzip
+import io
 import shutil
 from pathlib import Path
 
 from rlfd_drake.results import check_result_name, results_dir, write_compressed
 
-__all__ = ["keep_run_log", "read_episode_log", "run_log_file", "run_log_folders"]
+__all__ = [
+    "keep_run_log",
+    "read_episode_log",
+    "read_episode_rows",
+    "run_log_file",
+    "run_log_folders",
+]
 
 #: Files of a run folder that are copied as they are; config.json is required.
 #: imitation.json (runs started from a copied teacher) holds the teacher's success and
@@ -69,3 +77,8 @@ def read_episode_log(folder: str | Path) -> str:
     if (folder / f"{_EPISODES}.gz").is_file():
         return gzip.decompress((folder / f"{_EPISODES}.gz").read_bytes()).decode()
     raise ValueError(f"folder: {str(folder)!r} has no {_EPISODES} or {_EPISODES}.gz")
+
+
+def read_episode_rows(folder: str | Path) -> list[dict[str, str]]:
+    """The rows of :func:`read_episode_log`, one dict per episode, keyed by its header."""
+    return list(csv.DictReader(io.StringIO(read_episode_log(folder))))

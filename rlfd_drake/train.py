@@ -66,7 +66,7 @@ from rlfd_drake.observation_scaling import (
 from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
 from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
 from rlfd_drake.results import format_json, invoked_command, utc_now
-from rlfd_drake.run_log import read_episode_log
+from rlfd_drake.run_log import read_episode_rows
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
 
@@ -924,9 +924,7 @@ def train(
     venv.close()
     log = callbacks[0]
     # Over the whole run: a resumed process saw only its own episodes.
-    successes = [
-        int(row["success"]) for row in csv.DictReader(read_episode_log(run_dir).splitlines())
-    ]
+    successes = [int(row["success"]) for row in read_episode_rows(run_dir)]
     metrics = {
         "episodes": log.episodes,
         "timesteps": int(model.num_timesteps),
