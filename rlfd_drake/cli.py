@@ -394,6 +394,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         learning_rate=args.learning_rate,
         learning_rate_schedule=args.learning_rate_schedule,
         ppo_sde_sample_steps=args.ppo_sde_sample_steps,
+        ppo_history=args.ppo_history,
         sac_learning_starts=args.sac_learning_starts,
         sac_initial_ent_coef=args.sac_initial_ent_coef,
         sac_gradient_steps=args.sac_gradient_steps,
@@ -865,6 +866,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="PPO: state-dependent exploration (gSDE) redrawn every N steps; 0 = "
         "independent noise per step",
+    )
+    train.add_argument(
+        "--ppo-history",
+        type=int,
+        default=1,
+        help="PPO: the last N observations stacked as the policy's input (a memory of "
+        "the contact felt); 1 = the current observation alone",
     )
     train.add_argument(
         "--sac-learning-starts",

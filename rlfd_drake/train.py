@@ -132,6 +132,10 @@ class TrainConfig:
             that is saved (PPO's last iterate lost up to 8 points of training success
             at the end of the peg runs with a constant step).
         ppo_n_steps: PPO rollout length per env between updates.
+        ppo_history: PPO only: the last N observations stacked as its input
+            (``VecFrameStack``, newest last), a memory of the contact the policy has
+            felt, as ``history`` is SAC's; 1 = the current observation alone (the
+            recipes before 2026-12-06).
         ppo_sde_sample_steps: PPO only: 0 = SB3's independent Gaussian noise on every
             action; N > 0 = generalized state-dependent exploration (gSDE, Raffin et
             al. 2022): the noise is a fixed random linear map of the policy's last
@@ -243,6 +247,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     learning_rate_schedule: str = "constant"
     ppo_n_steps: int = 256
+    ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
     sac_gradient_steps: int = 1
@@ -287,6 +292,7 @@ class TrainConfig:
             "eval_episodes",
             "checkpoint_every_episodes",
             "ppo_n_steps",
+            "ppo_history",
             "sac_gradient_steps",
             "imitation_episodes",
             "imitation_epochs",
@@ -304,6 +310,8 @@ class TrainConfig:
                 f"ppo_sde_sample_steps={self.ppo_sde_sample_steps} needs algo 'ppo', got "
                 f"{self.algo!r}"
             )
+        if self.ppo_history > 1:
+            self._check_ppo_history()
         if self.sac_learning_starts < 0:
             raise ValueError(f"sac_learning_starts must be >= 0, got {self.sac_learning_starts}")
         if self.eval_every_episodes < 0:
@@ -385,6 +393,18 @@ class TrainConfig:
             DISCOUNT,
             self.distance_shaping_axes,
         )
+
+    def _check_ppo_history(self) -> None:
+        """ValueError naming the setting that PPO's stacked history cannot go with."""
+        conflicts = {
+            "algo": (self.algo != "ppo", f"{self.algo!r} (SAC stacks `history`)"),
+            "privileged_critic": (
+                self.privileged_critic,
+                "set (its entries would be stacked with the observation)",
+            ),
+            "imitate": (self.imitate is not None, "set (the copy is fitted on one observation)"),
+        }
+        _refuse_conflicts(f"ppo_history={self.ppo_history}", conflicts)
 
     def _check_privileged_critic(self) -> None:
         """ValueError naming the setting that a privileged critic cannot go with."""
@@ -474,7 +494,8 @@ def wrap_training_env(
 
 
 def make_envs(config: TrainConfig, n_envs: int, seed: int):
-    """The (vectorised, history-stacked for SAC) training or evaluation envs."""
+    """The (vectorised; history-stacked for SAC, and for PPO when asked) training or
+    evaluation envs."""
     vec_cls = SubprocVecEnv if n_envs > 1 else DummyVecEnv
     vec_kwargs = {"start_method": "spawn"} if n_envs > 1 else None
     wrapper = dict(  # returns the env itself when the config asks for none
@@ -496,8 +517,9 @@ def make_envs(config: TrainConfig, n_envs: int, seed: int):
         **wrapper,
         vec_env_kwargs=vec_kwargs,
     )
-    if config.algo == "sac" and config.history > 1:
-        venv = VecFrameStack(venv, n_stack=config.history)
+    stacked = {"sac": config.history, "ppo": config.ppo_history}.get(config.algo, 1)
+    if stacked > 1:
+        venv = VecFrameStack(venv, n_stack=stacked)
     return venv
 
 

@@ -323,3 +323,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     assert seen["c"].ppo_sde_sample_steps == 20 and seen["c"].log_std_init == -4.0
     assert main([*flags, "--ppo-sde-sample-steps", "-3", "--out", "unused"]) == 2
     assert "ppo_sde_sample_steps must be an integer >= 0, got -3" in capsys.readouterr().err
+    assert main([*flags, "--ppo-history", "4", "--out", "unused"]) == 0
+    assert seen["c"].ppo_history == 4
+    assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
+    assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err

@@ -438,24 +438,30 @@ def test_distance_shaping_pays_the_discounted_change_of_the_distance_potential()
 def test_deployed_policy_matches_the_frame_stacked_training_view():
     from stable_baselines3.common.vec_env import VecFrameStack
 
-    from rlfd_drake.policies import DeployedPolicy
-
     config = TrainConfig(algo="sac", envs=1, history=3, sac_learning_starts=4)
     venv = VecFrameStack(fast_venv(), n_stack=3)
     model = make_model(config, venv, None)
     model.learn(total_timesteps=8)  # non-zero actions after updates
+    deployed = _assert_deployed_acts_as_on_the_stack(model, venv, history=3)
+    deployed.reset()
+    np.testing.assert_array_equal(deployed._stack, 0.0)
+
+
+def _assert_deployed_acts_as_on_the_stack(model, venv, history: int):
+    """The model deployed (one observation per call) gives, step by step, the action
+    it gives on ``venv``'s frame-stacked view; returns the deployed policy."""
+    from rlfd_drake.policies import DeployedPolicy
+
     deployed = DeployedPolicy(model)
-    assert deployed.history == 3
+    assert deployed.history == history
     venv.seed(5)
     stacked = venv.reset()
     rng = np.random.default_rng(0)
     for _ in range(4):
-        newest = stacked[0, -26:]
         expected, _ = model.predict(stacked, deterministic=True)
-        np.testing.assert_allclose(deployed(newest), expected[0], rtol=0, atol=1e-7)
+        np.testing.assert_allclose(deployed(stacked[0, -26:]), expected[0], rtol=0, atol=1e-7)
         stacked, _, _, _ = venv.step(rng.uniform(-1, 1, (1, 6)).astype(np.float32))
-    deployed.reset()
-    np.testing.assert_array_equal(deployed._stack, 0.0)
+    return deployed
 
 
 def test_init_from_starts_from_the_source_networks(tmp_path):
@@ -800,6 +806,43 @@ def test_privileged_critic_trains_a_critic_that_reads_what_the_actor_cannot(tmp_
     expected, _ = loaded.predict(obs[0], deterministic=True)
     np.testing.assert_allclose(deployed(obs[0, :26]), expected, rtol=0, atol=1e-7)
     venv.close()
+
+
+def test_ppo_history_stacks_the_observations_it_trains_and_deploys_on():
+    """PPO with ``ppo_history`` learns on the frame-stacked view ``make_envs`` gives it,
+    and deployed it keeps the same stack itself (one observation per call)."""
+    from stable_baselines3.common.vec_env import VecFrameStack
+
+    from rlfd_drake.train import make_envs
+
+    config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, ppo_history=3)
+    envs = make_envs(config, 1, seed=0)
+    assert envs.observation_space.shape == (3 * 26,)
+    envs.close()
+    assert make_envs(replace(config, ppo_history=1), 1, seed=0).observation_space.shape == (26,)
+    venv = VecFrameStack(fast_venv(), n_stack=3)
+    model = make_model(config, venv, None)
+    before = _parameters(model)
+    model.learn(total_timesteps=32)
+    assert _changed(before, model)
+    _assert_deployed_acts_as_on_the_stack(model, venv, history=3)
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"ppo_history": 0}, "ppo_history must be >= 1, got 0"),
+        ({"ppo_history": 4, "algo": "sac"}, "ppo_history=4 cannot go with algo 'sac'"),
+        (
+            {"ppo_history": 4, "privileged_critic": True},
+            "ppo_history=4 cannot go with privileged_critic",
+        ),
+        ({"ppo_history": 2, "imitate": "force_search"}, "ppo_history=2 cannot go with imitate"),
+    ],
+)
+def test_ppo_history_is_refused_where_it_cannot_apply(fields, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**fields)
 
 
 @pytest.mark.parametrize(
