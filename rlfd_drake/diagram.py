@@ -106,6 +106,12 @@ class RlfdDiagramConfig:
             evaluates its output at every sample, which costs: ``run_episode`` keeps
             the two it reads.
         composition: one of ``COMPOSITIONS``.
+        residual_policy_from_activation: a policy run inside the diagram is first
+            called at the residual's activation time (``ResidualPolicyConfig``), as in
+            training; False calls it from the start, its actions held but not applied
+            until then, so that they showed in the observation's residual entries and
+            in the memory of a stacked or recurrent policy, unlike in training
+            (evaluations stored before 2026-12-06; kept to reproduce them).
         max_speed_m_s, max_angular_speed_rad_s: velocity of an action of 1 for the
             "hybrid" and "pure" compositions (5 cm/s, 20 deg/s).
     """
@@ -122,6 +128,7 @@ class RlfdDiagramConfig:
     log_period_s: float | None = 0.01
     logged_outputs: tuple[str, ...] | None = None
     composition: str = "residual"
+    residual_policy_from_activation: bool = True
     max_speed_m_s: float = 0.05
     max_angular_speed_rad_s: float = 0.35
 
@@ -311,6 +318,10 @@ def BuildRlfdDiagram(
             )
         )
     composer = builder.AddNamedSystem("composer", composer)
+    # When the policy's actions start to count (pure RL: from the start).
+    policy_activation = (
+        composer.config.activation_time_s if config.residual_policy_from_activation else 0.0
+    )
     observer = builder.AddNamedSystem(
         "observer",
         Observer(
@@ -363,7 +374,9 @@ def BuildRlfdDiagram(
             ResidualPolicy(
                 policy,
                 ResidualPolicyConfig(
-                    period_s=config.residual_period_for(task), observation_size=OBSERVATION_SIZE
+                    period_s=config.residual_period_for(task),
+                    observation_size=OBSERVATION_SIZE,
+                    activation_time_s=policy_activation,
                 ),
             ),
         )

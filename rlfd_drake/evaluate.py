@@ -664,6 +664,9 @@ def evaluate(
         "residual_mode": residual_mode,
         "composition": composition,
         "residual_bounds": list(config.residual_bounds(task)),
+        # False in evaluations stored before 2026-12-06 (the key was absent): the
+        # policy was called from the start, its unapplied actions in its observations.
+        "residual_policy_from_activation": config.residual_policy_from_activation,
         "deterministic": deterministic,
         "noise_scale": None if deterministic else noise_scale,
         "seed": seed,
@@ -914,6 +917,16 @@ def plot_peak_forces(panels: dict[str, list[tuple[str, dict]]], path: Path) -> P
     axes[0].set_yticks(np.arange(len(names)), names, fontsize=7)
     axes[0].invert_yaxis()
     return _save(plt, fig, axes[:1], path, 0.0)
+
+
+def called_from_start(result: dict) -> bool:
+    """True for an evaluation whose residual policy was called from the episode's start
+    (stored before 2026-12-06, without ``residual_policy_from_activation``): its
+    unapplied actions before the residual's activation were in its observations and
+    memory, unlike in training. An evaluation of the DMP alone calls no policy."""
+    if result.get("policy") == "dmp":
+        return False
+    return not result.get("residual_policy_from_activation", False)
 
 
 def write_evaluation(

@@ -1822,11 +1822,18 @@ def _bounds(task: str) -> list[float]:
     return list(RlfdDiagramConfig().residual_bounds(load_task(task)))
 
 
+#: Baselines whose training episodes run their residual policy inside the diagram, as
+#: its evaluations do: trained since 2026-12-06 with the policy called from the
+#: residual's activation, in folders of their own (those trained before, the policy
+#: called from the start, keep theirs).
+_FROM_ACTIVATION_SUFFIX = {"linear": "_from_activation"}
+
+
 def _baseline_path(method: str, task: str, mode: str, episodes: int, seed: int) -> Path:
     """Where :func:`_baseline_run` keeps the trained baseline (it may not exist)."""
-    return (
-        Path("runs") / "reproduce" / f"{task}_{method}_{mode}_e{episodes}_s{seed}" / "baseline.npz"
-    )
+    suffix = _FROM_ACTIVATION_SUFFIX.get(method, "")
+    folder = f"{task}_{method}_{mode}_e{episodes}_s{seed}{suffix}"
+    return Path("runs") / "reproduce" / folder / "baseline.npz"
 
 
 def _baseline_run(
@@ -1872,7 +1879,12 @@ def stored_or_new_evaluation(
     seed, composition and residual bounds that has the ``required`` keys (figures
     added to evaluations after it was stored); None when there is no such stored
     evaluation and the policy is not ``available`` (a run folder of another machine)."""
-    from rlfd_drake.evaluate import evaluate, result_from_json, write_evaluation
+    from rlfd_drake.evaluate import (
+        called_from_start,
+        evaluate,
+        result_from_json,
+        write_evaluation,
+    )
 
     path = results_dir() / f"{name}.json"
     stored = None
@@ -1887,11 +1899,12 @@ def stored_or_new_evaluation(
         )
         if not same:
             stored = None
-        elif all(key in stored for key in required):
+        elif all(key in stored for key in required) and not called_from_start(stored):
             return stored
     if not available:
         # A stored evaluation that predates some figures still has the others (shown
-        # as "n/a" where missing) when the policy is not here to evaluate again.
+        # as "n/a" where missing), and one whose policy was called from the start is
+        # marked (``_cell``), when the policy is not here to evaluate again.
         return stored
     print(f"  evaluating {name} ({episodes} episodes)", flush=True)
     result = evaluate(
@@ -1927,7 +1940,12 @@ def _cell(
     given, collects (folder, command, training seed) of a "run:" row's run that has
     neither its policy here nor a stored evaluation (to be trained by
     :func:`train_runs`; the cell is not run until then)."""
-    from rlfd_drake.evaluate import NAMED_POLICIES, policy_stem, sampling_suffix
+    from rlfd_drake.evaluate import (
+        NAMED_POLICIES,
+        called_from_start,
+        policy_stem,
+        sampling_suffix,
+    )
 
     train_episodes, eval_episodes = BUDGETS[budget]
     eval_episodes = evaluation_episodes or eval_episodes
@@ -2024,6 +2042,8 @@ def _cell(
         "training_episodes": trained,
         "result_file": f"{name}.json",
     }
+    if called_from_start(result):
+        cell["policy_called_from_start"] = True
     return cell, result
 
 
@@ -2103,6 +2123,8 @@ def _cell_over_seeds(
         "per_seed": {str(s): c for s, c in measured.items()},
         "missing_seeds": {str(s): reason for s, reason in missing.items()},
     }
+    if any(c.get("policy_called_from_start") for c in cells):
+        cell["policy_called_from_start"] = True
     return cell, per_seed[min(measured)][1]
 
 
@@ -2125,12 +2147,23 @@ _METRIC_KEYS = {
 }
 
 
+#: The footnote of a cell whose stored evaluation called its policy from the start.
+CALLED_FROM_START_NOTE = (
+    "\u2020 stored before 2026-12-06, when the policy was called from the episode's "
+    "start and its unapplied actions before the residual's activation were in its "
+    "observations, unlike in training; not measured again here (the policy is not on "
+    "this machine, or the row is measured anew only on the paper budget)."
+)
+
+
 def _format_metric(cell: dict, metric: str) -> str:
-    """The cell's figure; a mean over training seeds says over how many of those asked."""
+    """The cell's figure; a mean over training seeds says over how many of those asked;
+    a dagger marks an evaluation that called its policy from the start."""
     seeds = ""
     if "training_seeds" in cell:
         seeds = f" ({len(cell['training_seeds'])} of {cell['seeds_asked']} seeds)"
-    return _format_figure(cell, metric) + seeds
+    dagger = " \u2020" if cell.get("policy_called_from_start") else ""
+    return _format_figure(cell, metric) + seeds + dagger
 
 
 def _format_figure(cell: dict, metric: str) -> str:
@@ -2206,6 +2239,12 @@ def _markdown(
     }
     if reasons:
         lines += ["", "Not run: " + "; ".join(sorted(reasons)) + "."]
+    if any(
+        cell.get("policy_called_from_start")
+        for row_cells in cells.values()
+        for cell in row_cells.values()
+    ):
+        lines += ["", CALLED_FROM_START_NOTE]
     return "\n".join(lines) + "\n"
 
 

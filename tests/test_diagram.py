@@ -180,7 +180,11 @@ def test_controller_law_matches_the_reference_maths(episode):
         np.testing.assert_allclose(controller.CalcTorque(x, X_d, V_d), expected, atol=1e-9)
 
 
-def test_policy_inside_the_diagram_acts_at_10_hz(peg):
+@pytest.mark.parametrize("from_activation", [True, False])
+def test_policy_inside_the_diagram_acts_at_10_hz(peg, from_activation):
+    """The policy is first called at the residual's activation, as a training episode
+    first asks for an action there (or, as evaluations before 2026-12-06 did, from the
+    start, its actions held but not applied until then), then every 0.1 s."""
     task, model, X_WP_start = peg
     calls = []
 
@@ -189,7 +193,9 @@ def test_policy_inside_the_diagram_acts_at_10_hz(peg):
         calls.append(float(obs[19]))
         return np.full(6, 5.0 * obs[19])
 
-    config = RlfdDiagramConfig(residual_activation_s=0.5)
+    config = RlfdDiagramConfig(
+        residual_activation_s=0.5, residual_policy_from_activation=from_activation
+    )
     rlfd = BuildRlfdDiagram(task, model, config, policy=policy)
     assert not any(
         rlfd.diagram.get_input_port(i).get_name() == "residual"
@@ -205,9 +211,13 @@ def test_policy_inside_the_diagram_acts_at_10_hz(peg):
     # sample (a log at t_k records what the diagram saw just before its update at t_k),
     # the policy's action at the update t_j being 5 * t_j / 10 s (float32 obs).
     t_update = np.maximum(np.ceil(t / 0.1 - 1e-9) - 1.0, 0.0) * 0.1
-    np.testing.assert_allclose(residual, np.tile(0.5 * t_update, (6, 1)), atol=1e-6)
-    assert np.unique(np.round(residual[0], 6)).size == 10  # ten distinct held actions
-    assert len(calls) == 1 + 10  # initialisation + updates at 0, 0.1, ..., 0.9 s
+    first_call_s = 0.5 if from_activation else 0.0
+    expected = np.where(t_update > first_call_s - 1e-9, 0.5 * t_update, 0.0)
+    np.testing.assert_allclose(residual, np.tile(expected, (6, 1)), atol=1e-6)
+    if from_activation:  # updates at 0.5, ..., 0.9 s, the first at the activation
+        assert len(calls) == 5 and calls[0] == pytest.approx(0.05)
+    else:  # initialisation + updates at 0, 0.1, ..., 0.9 s
+        assert len(calls) == 1 + 10 and np.unique(np.round(residual[0], 6)).size == 10
     # The composer applies it after activation: translation max_translation_m * a.
     _, X_base = _log(rlfd, context, "X_WE_base")
     _, X_desired = _log(rlfd, context, "X_WE_desired")

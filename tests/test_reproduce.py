@@ -41,6 +41,8 @@ def _fake_evaluation(
         "peak_joint_contact_torque_nm": 2.5,
         "peak_low_passed_force_n": 20.0,
         "episodes": episodes,
+        "policy": policy,
+        "residual_policy_from_activation": True,
         "per_bin": [
             {"rotation_offset_deg": 0.0, "position_offset_m": d, "success_rate": rate, "n": 4}
             for d in (0.005, 0.01)
@@ -510,7 +512,8 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
         evaluate_module, "evaluate", lambda *a, **k: fresh.append(a) or {"episodes": 40}
     )
     monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
-    stored = {"episodes": 40, "seed": 0, "success_rate": 0.0}
+    stored = {"episodes": 40, "seed": 0, "success_rate": 0.0, "policy": "random"}
+    stored["residual_policy_from_activation"] = True
     write_result("eval_rj45_random_n40_s0", stored, seed=0)  # before bounds were stored
     reproduce.stored_or_new_evaluation(
         "rj45", "random", "eval_rj45_random_n40_s0", "full", 40, 0, 1
@@ -531,6 +534,51 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
         required=("peak_joint_contact_torque_nm",),
     )
     assert len(fresh) == 2
+
+
+def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
+    tmp_path, monkeypatch
+):
+    """Evaluations stored before the policy was first called at the residual's
+    activation are measured again where the policy is here; where it is not, they
+    are kept and marked in the table. The DMP alone calls no policy: kept as is."""
+    from rlfd_drake import evaluate as evaluate_module
+    from rlfd_drake.results import write_result
+
+    monkeypatch.chdir(tmp_path)
+    fresh = []
+
+    def fake_evaluate(task, policy, episodes, seed, **kwargs):
+        fresh.append(policy)
+        return _fake_evaluation(task, policy, "", "", episodes, seed, 1)
+
+    monkeypatch.setattr(evaluate_module, "evaluate", fake_evaluate)
+    monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
+    bounds = reproduce._bounds("peg")
+    for policy in ("dmp", "random"):  # stored before: no residual_policy_from_activation
+        old = {"episodes": 40, "seed": 0, "success_rate": 0.4, "policy": policy}
+        write_result(f"eval_peg_{policy}_n40_s0", {**old, "residual_bounds": bounds}, seed=0)
+    args = ("full", 40, 0, 1)
+    dmp = reproduce.stored_or_new_evaluation("peg", "dmp", "eval_peg_dmp_n40_s0", *args)
+    assert dmp["success_rate"] == 0.4 and fresh == []
+    name = "eval_peg_random_n40_s0"
+    kept = reproduce.stored_or_new_evaluation("peg", "random", name, *args, available=False)
+    assert kept["success_rate"] == 0.4 and fresh == []
+    again = reproduce.stored_or_new_evaluation("peg", "random", name, *args)
+    assert again["residual_policy_from_activation"] and fresh == ["random"]
+
+    def stored_random(task, policy, *a, **k):
+        result = _fake_evaluation(task, policy, *a, **{**k, "available": True})
+        return {**result, "residual_policy_from_activation": policy != "random"}
+
+    monkeypatch.setattr(reproduce, "stored_or_new_evaluation", stored_random)
+    data = reproduce.reproduce_table("2", budget="quick", seed=0, workers=1)
+    cells = {row["source"]: row["ours"]["easy"] for row in data["rows"]}
+    assert cells["random"]["policy_called_from_start"]
+    assert "policy_called_from_start" not in cells["force_search"]
+    markdown = (tmp_path / "results" / "table_2.md").read_text()
+    assert "| 60.0 +- 5.0 \u2020 |" in markdown and "| 70.0 +- 5.0 |" in markdown
+    assert reproduce.CALLED_FROM_START_NOTE in markdown
 
 
 def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp_path, monkeypatch):

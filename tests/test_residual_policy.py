@@ -31,11 +31,12 @@ class CountingPolicy:
         return np.full(6, 0.1 * self.calls)
 
 
-def _simulate(policy, duration: float, obs: np.ndarray | None = None):
+def _simulate(policy, duration: float, obs: np.ndarray | None = None, activation_s: float = 0.0):
     obs = np.arange(N_OBS, dtype=float) if obs is None else obs
     builder = DiagramBuilder()
     source = builder.AddSystem(ConstantVectorSource(obs))
-    system = builder.AddSystem(ResidualPolicy(policy, ResidualPolicyConfig(0.1, N_OBS)))
+    config = ResidualPolicyConfig(0.1, N_OBS, activation_time_s=activation_s)
+    system = builder.AddSystem(ResidualPolicy(policy, config))
     builder.Connect(source.get_output_port(), system.GetInputPort("observation"))
     log = builder.AddSystem(VectorLogSink(6, 0.05))
     builder.Connect(system.GetOutputPort("residual"), log.get_input_port())
@@ -57,6 +58,25 @@ def test_callable_held_at_10_hz_and_reset_at_initialisation():
     assert policy.resets == 2
     simulator.AdvanceTo(1.5)
     assert np.all(simulator.get_context().get_discrete_state(0).get_value() == 1.0)
+
+
+def test_policy_first_called_at_its_activation_time():
+    """Before the activation time the residual holds zero and the policy is not
+    called (its memory starts where a training episode's does); from it, as usual."""
+    policy = CountingPolicy()
+    simulator, times, actions = _simulate(policy, 0.55, activation_s=0.3)
+    assert policy.resets == 1
+    # Updates at 0.3, 0.4, 0.5 (0.3 is 3 x 0.1 s of float sums, a hair off 0.3).
+    assert policy.calls == 3
+    np.testing.assert_array_equal(actions[times < 0.3 - 1e-9], 0.0)
+    np.testing.assert_allclose(actions[np.isclose(times, 0.35)][0], 0.1)
+    np.testing.assert_allclose(actions[-1], 0.3)
+    simulator.get_mutable_context().SetTime(0.0)
+    simulator.Initialize()  # a new episode starts at zero again
+    assert policy.resets == 2 and policy.calls == 0
+    np.testing.assert_array_equal(simulator.get_context().get_discrete_state(0).get_value(), 0.0)
+    with pytest.raises(ValueError, match="activation_time_s must be a number >= 0, got -1"):
+        ResidualPolicy(policy, ResidualPolicyConfig(0.1, N_OBS, activation_time_s=-1.0))
 
 
 def test_torch_module_policy():

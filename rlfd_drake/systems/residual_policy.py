@@ -18,10 +18,16 @@ class ResidualPolicyConfig:
     """Attributes:
     period_s: policy period (10 Hz in the paper), s.
     observation_size: n, the size of the ``observation`` input.
+    activation_time_s: the policy is first called at the first update at or after
+        this time; before it the residual holds zero and the policy is not called, so
+        its first observation and its memory (a frame stack, an LSTM) start where a
+        training episode's do (``RlfdEnv`` runs the DMP alone up to the activation
+        time, its action input held at zero). 0 = called from the start.
     """
 
     period_s: float = 0.1
     observation_size: int = 26
+    activation_time_s: float = 0.0
 
 
 def _as_callable(policy) -> Policy:
@@ -53,15 +59,15 @@ class ResidualPolicy(LeafSystem):
 
     * ``observation`` (n): the Observer's observation.
     * ``residual`` (6): the last action, held between updates (zero-order hold),
-      clipped to [-1, 1].
+      clipped to [-1, 1]; zero before ``activation_time_s``.
 
     ``policy`` is any callable ``obs (n,) float32 -> action (6,)``: a torch
     ``nn.Module`` (called under ``torch.no_grad``), a Stable-Baselines3 model via
     ``lambda obs: model.predict(obs, deterministic=True)[0]``, or a baseline. If the
     policy has a ``reset()`` method (recurrent state), it is called at every
     initialisation of the diagram (``Simulator.Initialize``), which also computes
-    the first action from the initial observation. A non-finite or wrongly shaped
-    action raises RuntimeError.
+    the first action from the initial observation when the policy acts from the start.
+    A non-finite or wrongly shaped action raises RuntimeError.
     """
 
     def __init__(
@@ -72,6 +78,12 @@ class ResidualPolicy(LeafSystem):
         super().__init__()
         if config.period_s <= 0.0 or config.observation_size <= 0:
             raise ValueError(f"invalid ResidualPolicyConfig {config}")
+        if not (np.isfinite(config.activation_time_s) and config.activation_time_s >= 0.0):
+            raise ValueError(
+                f"activation_time_s must be a number >= 0, got {config.activation_time_s}"
+            )
+        # Periodic event times are sums of floats: 50 x 0.1 s may land a hair before 5 s.
+        self._first_call_s = config.activation_time_s - 1e-9
         self.config = config
         self._policy_object = policy
         self._policy = _as_callable(policy)
@@ -85,9 +97,12 @@ class ResidualPolicy(LeafSystem):
         reset = getattr(self._policy_object, "reset", None)
         if callable(reset):
             reset()
+        discrete_state.set_value(0, np.zeros(6))
         self._update(context, discrete_state)
 
     def _update(self, context: Context, discrete_state: DiscreteValues) -> None:
+        if context.get_time() < self._first_call_s:
+            return  # the held zero stays
         obs = np.asarray(self._observation_port.Eval(context), dtype=np.float32)
         action = np.asarray(self._policy(obs), dtype=float).reshape(-1)
         if action.shape != (6,) or not np.all(np.isfinite(action)):
