@@ -536,14 +536,10 @@ def test_stored_evaluations_with_other_residual_bounds_are_not_reused(tmp_path, 
     assert len(fresh) == 2
 
 
-def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
-    tmp_path, monkeypatch
-):
-    """Evaluations stored before the policy was first called at the residual's
-    activation are measured again where the policy is here; where it is not, they
-    are kept and marked in the table. The DMP alone calls no policy: kept as is."""
+def _record_fresh_evaluations(tmp_path, monkeypatch) -> list[str]:
+    """Works in ``tmp_path``; every evaluation run anew is a fake one whose policy is
+    appended to the list returned (nothing is written)."""
     from rlfd_drake import evaluate as evaluate_module
-    from rlfd_drake.results import write_result
 
     monkeypatch.chdir(tmp_path)
     fresh = []
@@ -554,6 +550,18 @@ def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
 
     monkeypatch.setattr(evaluate_module, "evaluate", fake_evaluate)
     monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
+    return fresh
+
+
+def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
+    tmp_path, monkeypatch
+):
+    """Evaluations stored before the policy was first called at the residual's
+    activation are measured again where the policy is here; where it is not, they
+    are kept and marked in the table. The DMP alone calls no policy: kept as is."""
+    from rlfd_drake.results import write_result
+
+    fresh = _record_fresh_evaluations(tmp_path, monkeypatch)
     bounds = reproduce._bounds("peg")
     for policy in ("dmp", "random"):  # stored before: no residual_policy_from_activation
         old = {"episodes": 40, "seed": 0, "success_rate": 0.4, "policy": policy}
@@ -584,18 +592,9 @@ def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
 def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp_path, monkeypatch):
     """Run folders are local: without one, its stored evaluation and its training log
     in results/ still fill the row, and nothing is evaluated anew for it."""
-    from rlfd_drake import evaluate as evaluate_module
     from rlfd_drake.results import write_result
 
-    monkeypatch.chdir(tmp_path)
-    evaluated = []
-
-    def fake_evaluate(task, policy, episodes, seed, **kwargs):
-        evaluated.append(policy)
-        return _fake_evaluation(task, policy, "", "", episodes, seed, 1)
-
-    monkeypatch.setattr(evaluate_module, "evaluate", fake_evaluate)
-    monkeypatch.setattr(evaluate_module, "write_evaluation", lambda *a: None)
+    evaluated = _record_fresh_evaluations(tmp_path, monkeypatch)
     monkeypatch.setattr(
         reproduce, "_baseline_run", lambda *a: tmp_path / "runs" / "x" / "baseline.npz"
     )
