@@ -18,10 +18,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import InitializeParams, Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Gain, LogVectorOutput, PassThrough, VectorLogSink
 
@@ -540,3 +541,78 @@ def MakeSimulator(rlfd: RlfdDiagram) -> Simulator:
     """A simulator for the diagram (discrete systems only: no integrator tuning)."""
     simulator = Simulator(rlfd.diagram)
     return simulator
+
+
+@dataclass(frozen=True)
+class DiagramStateSnapshot:
+    """The time and the state of every stateful subsystem of a diagram's context, by
+    subsystem name: discrete state groups (copies) and abstract states (clones, e.g.
+    the plant's memory of its last step, which its sampled output ports read)."""
+
+    time_s: float
+    states: dict[str, tuple[tuple[np.ndarray, ...], tuple[AbstractValue, ...]]]
+
+
+def SnapshotDiagramState(rlfd: RlfdDiagram, context: Context) -> DiagramStateSnapshot:
+    """Copies the state of ``context`` (a root context of ``rlfd.diagram``)."""
+    states = {}
+    for system in rlfd.diagram.GetSystems():
+        sub = system.GetMyContextFromRoot(context)
+        if sub.num_continuous_states():
+            raise ValueError(f"system {system.get_name()!r} has continuous state: not snapshotted")
+        groups = sub.num_discrete_state_groups()
+        abstract = sub.num_abstract_states()
+        if groups or abstract:
+            states[system.get_name()] = (
+                tuple(sub.get_discrete_state(g).get_value().copy() for g in range(groups)),
+                tuple(sub.get_abstract_state(a).Clone() for a in range(abstract)),
+            )
+    return DiagramStateSnapshot(float(context.get_time()), states)
+
+
+def ResumeFromSnapshot(
+    rlfd: RlfdDiagram, simulator: Simulator, snapshot: DiagramStateSnapshot
+) -> None:
+    """Puts ``simulator`` (of ``rlfd.diagram``, not yet advanced) where ``snapshot``
+    was taken, in another diagram built the same way, and initialises it without the
+    initialisation events (which would restart the DMP, the controller's filter and
+    the observer's peaks): the simulation then goes on bit for bit as the one the
+    snapshot was taken from. The diagram's geometry (its parameters) is its own, so the
+    two must have been built from the same task, fixture error and configuration.
+
+    A ``ResidualPolicy`` missing from the snapshot (taken without a policy, or with
+    another one) starts from its initial state, its policy reset: right only while
+    the policy has not acted yet (before its activation time).
+
+    Raises:
+        ValueError: a stateful subsystem other than the residual policy is missing
+            from the snapshot, or its state is shaped otherwise.
+    """
+    context = simulator.get_mutable_context()
+    context.SetTime(snapshot.time_s)
+    policy_name = None if rlfd.residual_policy is None else rlfd.residual_policy.get_name()
+    for system in rlfd.diagram.GetSystems():
+        name = system.get_name()
+        sub = system.GetMyMutableContextFromRoot(context)
+        groups = sub.num_discrete_state_groups()
+        abstract = sub.num_abstract_states()
+        if not (groups or abstract):
+            continue
+        if name not in snapshot.states:
+            if name == policy_name:
+                continue
+            raise ValueError(f"the snapshot has no state of subsystem {name!r}")
+        values, abstract_values = snapshot.states[name]
+        shapes = [sub.get_discrete_state(g).size() for g in range(groups)]
+        if shapes != [v.size for v in values] or abstract != len(abstract_values):
+            raise ValueError(
+                f"subsystem {name!r}: state of sizes {shapes} and {abstract} abstract, "
+                f"snapshot of sizes {[v.size for v in values]} and {len(abstract_values)}"
+            )
+        for g, value in enumerate(values):
+            sub.SetDiscreteState(g, value)
+        for a, value in enumerate(abstract_values):
+            sub.get_mutable_abstract_state(a).SetFrom(value)
+    if rlfd.residual_policy is not None:
+        rlfd.residual_policy.ResetPolicy()
+    simulator.Initialize(InitializeParams(suppress_initialization_events=True))

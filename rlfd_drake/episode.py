@@ -14,8 +14,11 @@ start is a failed episode with its reason, never an exception.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -29,10 +32,13 @@ from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import (
     RESIDUAL_SIZE,
     BuildRlfdDiagram,
+    DiagramStateSnapshot,
     MakeSimulator,
     PoseFromOffset,
+    ResumeFromSnapshot,
     RlfdDiagramConfig,
     SetEpisodeStart,
+    SnapshotDiagramState,
 )
 from rlfd_drake.dmp import CartesianDmp, DmpConfig, fit_cartesian_dmp
 from rlfd_drake.geometry import quat_normalize
@@ -46,6 +52,8 @@ __all__ = [
     "EPISODE_LOGS",
     "load_task_dmp",
     "make_episode_specs",
+    "clear_prefix_cache",
+    "prefix_cache_stats",
     "run_episode",
 ]
 
@@ -260,6 +268,97 @@ def _final_failure_kind(task: TaskSpec, X_WF_true: RigidTransform, X_WP: RigidTr
     return f"missed: {where}"
 
 
+@dataclass(frozen=True)
+class _EpisodePrefix:
+    """An episode up to the end of its last chunk before the residual's activation:
+    the diagram's state there, the loop's bookkeeping and the logs so far."""
+
+    chunk_index: int
+    state: DiagramStateSnapshot
+    latched_at: float | None
+    within_since: float | None
+    logs: dict[str, tuple[np.ndarray, np.ndarray]]
+
+
+#: The DMP-only starts of recent episodes, by ``_prefix_key``, least recently used
+#: first (per process: a snapshot holds Drake values that do not pickle).
+_PREFIX_CACHE: OrderedDict[str, _EpisodePrefix] = OrderedDict()
+#: About 30 kB a prefix (two logs of 5 s at 100 Hz and the plant's step memory).
+_PREFIX_CACHE_SIZE = 512
+_PREFIX_STATS = {"hits": 0, "stored": 0}
+
+
+def prefix_cache_stats() -> dict[str, int]:
+    """This process's counts of episodes that resumed from a stored DMP-only start
+    ("hits") and of starts stored ("stored"), and the number held ("held")."""
+    return {**_PREFIX_STATS, "held": len(_PREFIX_CACHE)}
+
+
+def clear_prefix_cache() -> None:
+    """Forgets every stored episode start and zeroes the counts."""
+    _PREFIX_CACHE.clear()
+    _PREFIX_STATS.update(hits=0, stored=0)
+
+
+def _fingerprint_parts(value, out: list[bytes]) -> None:
+    """Appends an exact, type-tagged byte encoding of ``value`` to ``out``."""
+    if value is None or isinstance(value, bool | int | str | Path):
+        out.append(f"{type(value).__name__}:{value!s};".encode())
+    elif isinstance(value, float):
+        out.append(f"float:{value.hex()};".encode())
+    elif isinstance(value, np.ndarray):
+        out.append(f"ndarray:{value.dtype.str}:{value.shape};".encode())
+        out.append(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, tuple | list):
+        out.append(f"{type(value).__name__}:{len(value)}(".encode())
+        for item in value:
+            _fingerprint_parts(item, out)
+        out.append(b")")
+    elif dataclasses.is_dataclass(value):
+        out.append(f"{type(value).__qualname__}(".encode())
+        for f in dataclasses.fields(value):
+            out.append(f"{f.name}=".encode())
+            _fingerprint_parts(getattr(value, f.name), out)
+        out.append(b")")
+    else:
+        raise TypeError(f"cannot fingerprint a {type(value).__name__}")
+
+
+def _prefix_key(
+    task: TaskSpec,
+    dmp_model: CartesianDmp,
+    spec: EpisodeSpec,
+    config: RlfdDiagramConfig,
+    chunk_s: float,
+    stop_after_success_s: float | None,
+) -> str:
+    """What decides an episode up to the residual's activation: the task, the DMP, the
+    start and fixture error, the diagram's configuration except what only acts on
+    the residual (its mode), and the loop's chunks and stopping rule."""
+    parts: list[bytes] = []
+    before_activation = replace(config, residual_mode="full")
+    for value in (task, dmp_model, spec, before_activation, chunk_s, stop_after_success_s):
+        _fingerprint_parts(value, parts)
+    return hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
+
+
+def _chunk_ends(t_end: float, chunk_s: float) -> list[float]:
+    """The times the episode loop advances to: ``chunk_s`` added up to ``t_end``."""
+    ends = []
+    t = 0.0
+    while t < t_end - 1e-9:
+        t = min(t + chunk_s, t_end)
+        ends.append(t)
+    return ends
+
+
+def _last_chunk_before(ends: list[float], activation_s: float, chunk_s: float) -> int | None:
+    """Index of the last chunk end at least half a chunk before the activation (no
+    residual update can have fired by then), or None."""
+    before = [i for i, t in enumerate(ends) if t <= activation_s - 0.5 * chunk_s]
+    return before[-1] if before else None
+
+
 def run_episode(
     task: TaskSpec,
     dmp_model: CartesianDmp,
@@ -273,6 +372,7 @@ def run_episode(
     stop_after_success_s: float | None = 0.5,
     chunk_s: float = 0.1,
     realtime_rate: float | None = None,
+    reuse_prefix: bool = True,
 ) -> EpisodeResult:
     """Runs one episode and measures it.
 
@@ -296,6 +396,14 @@ def run_episode(
         realtime_rate: if given (with meshcat), the episode is drawn live while it is
             recorded, paced at this multiple of real time (0 = as fast as possible), so
             that it can be watched; None records without drawing live (faster).
+        reuse_prefix: until the residual's activation the DMP drives alone, so the
+            episode's first half depends only on the task, DMP, start, fixture error
+            and configuration, not on the residual policy. True keeps that part (the
+            state at the last 0.1 s chunk before the activation, and the logs so far)
+            in a per-process cache and resumes later episodes with the same key from
+            it, bit for bit the same episode (``tests/test_episode.py``) for about 30 %
+            less time. Not used with a meshcat, a coupling policy, the hybrid or pure
+            compositions, or a policy called from the start.
 
     Returns:
         The episode's result. Never raises for simulator, IK or policy failures.
@@ -352,13 +460,33 @@ def run_episode(
             peak_force_distance_m=metrics.get("peak_force_distance_m", nan),
         )
 
-    X_WP_start = PoseFromOffset(
-        demo_start_pose(dmp_model), np.asarray(spec.start_dp), spec.start_dq
-    )
-    try:
-        SetEpisodeStart(rlfd, context, X_WP_start)
-    except RuntimeError as e:
-        return result(f"ik: {_first_line(e)}", False)
+    ends = _chunk_ends(task.episode_time_s, chunk_s)
+    prefix_index = None
+    if (
+        reuse_prefix
+        and meshcat is None
+        and coupling_policy is None
+        and config.composition == "residual"
+        and (policy is None or config.residual_policy_from_activation)
+    ):
+        prefix_index = _last_chunk_before(ends, rlfd.composer.config.activation_time_s, chunk_s)
+    key = None
+    prefix = None
+    if prefix_index is not None:
+        key = _prefix_key(task, dmp_model, spec, config, chunk_s, stop_after_success_s)
+        prefix = _PREFIX_CACHE.get(key)
+        if prefix is not None:
+            _PREFIX_CACHE.move_to_end(key)
+            _PREFIX_STATS["hits"] += 1
+
+    if prefix is None:
+        X_WP_start = PoseFromOffset(
+            demo_start_pose(dmp_model), np.asarray(spec.start_dp), spec.start_dq
+        )
+        try:
+            SetEpisodeStart(rlfd, context, X_WP_start)
+        except RuntimeError as e:
+            return result(f"ik: {_first_line(e)}", False)
 
     if meshcat is not None:
         meshcat.StartRecording(set_visualizations_while_recording=realtime_rate is not None)
@@ -369,12 +497,16 @@ def run_episode(
     success_port = diagram.GetOutputPort("success")
     distance_port = diagram.GetOutputPort("distance_to_goal")
     force_port = diagram.GetOutputPort("force_metrics")
+    first_chunk = 0
     try:
-        simulator.Initialize()
-        t_end = task.episode_time_s
-        t = 0.0
-        while t < t_end - 1e-9:
-            t = min(t + chunk_s, t_end)
+        if prefix is None:
+            simulator.Initialize()
+        else:
+            ResumeFromSnapshot(rlfd, simulator, prefix.state)
+            latched_at, within_since = prefix.latched_at, prefix.within_since
+            first_chunk = prefix.chunk_index + 1
+        for index in range(first_chunk, len(ends)):
+            t = ends[index]
             simulator.AdvanceTo(t)
             if task.force_limit_n is not None and force_port.Eval(context)[3] > task.force_limit_n:
                 force_limit_broken = True
@@ -392,6 +524,8 @@ def run_episode(
                 and t - within_since >= stop_after_success_s - 1e-9
             ):
                 break
+            if index == prefix_index and prefix is None:
+                _store_prefix(key, index, rlfd, context, latched_at, within_since)
     except RuntimeError as e:
         message = _first_line(e)
         kind = "policy" if message.startswith("ResidualPolicy") else "solver"
@@ -404,20 +538,20 @@ def run_episode(
                 Path(record_html).write_text(meshcat.StaticHtml())
 
     forces = force_port.Eval(context)
-    log = rlfd.logs["distance_to_goal"].FindLog(context)
-    distances = log.data()[0]
+    distance_times, distance_data = _log_so_far(rlfd, context, "distance_to_goal", prefix)
+    distances = distance_data[0]
     reached = np.flatnonzero(distances <= kappa)
     if reached.size:
-        insertion_time = float(log.sample_times()[reached[0]])
+        insertion_time = float(distance_times[reached[0]])
     else:
         # Within kappa only between log samples: the end of the chunk that latched it.
         insertion_time = nan if latched_at is None else latched_at
-    force_log = rlfd.logs["force_metrics"].FindLog(context)
+    force_times, force_data = _log_so_far(rlfd, context, "force_metrics", prefix)
     peak_time, peak_distance = _when_peaked(
-        force_log.sample_times(),
-        force_log.data()[0],
+        force_times,
+        force_data[0],
         float(forces[0]),
-        log.sample_times(),
+        distance_times,
         distances,
     )
     metrics = {
@@ -440,11 +574,9 @@ def run_episode(
     if failure is not None:
         return result(failure, False, **metrics)
     if force_limit_broken:
-        broken = np.flatnonzero(force_log.data()[3] > task.force_limit_n)
+        broken = np.flatnonzero(force_data[3] > task.force_limit_n)
         k = int(broken[0]) if broken.size else -1
-        when = (
-            f"at t = {force_log.sample_times()[k]:.2f} s, {1e3 * distances[k]:.1f} mm from the goal"
-        )
+        when = f"at t = {force_times[k]:.2f} s, {1e3 * distances[k]:.1f} mm from the goal"
         reason = f"force_limit: {forces[3]:.1f} N (low-passed) > {task.force_limit_n:g} N {when}"
         return result(reason, False, **metrics)
     latched = bool(success_port.Eval(context)[0] > 0.5) or reached.size > 0
@@ -454,6 +586,44 @@ def run_episode(
         angle = metrics["final_angle_deg"]
         return result(f"orientation: {angle:.1f} deg > {task.kappa_deg:g} deg", False, **metrics)
     return result(None, True, **metrics)
+
+
+def _store_prefix(
+    key: str,
+    index: int,
+    rlfd,
+    context,
+    latched_at: float | None,
+    within_since: float | None,
+) -> None:
+    """Keeps the episode so far (see ``run_episode``'s ``reuse_prefix``)."""
+    logs = {}
+    for name in EPISODE_LOGS:
+        log = rlfd.logs[name].FindLog(context)
+        logs[name] = (log.sample_times().copy(), log.data().copy())
+    _PREFIX_CACHE[key] = _EpisodePrefix(
+        index, SnapshotDiagramState(rlfd, context), latched_at, within_since, logs
+    )
+    _PREFIX_STATS["stored"] += 1
+    while len(_PREFIX_CACHE) > _PREFIX_CACHE_SIZE:
+        _PREFIX_CACHE.popitem(last=False)
+
+
+def _log_so_far(
+    rlfd, context, name: str, prefix: _EpisodePrefix | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(sample times, data) of an episode log, the stored prefix's samples first when
+    the episode resumed from one (the resumed log starts at the snapshot's time)."""
+    log = rlfd.logs[name].FindLog(context)
+    times, data = log.sample_times(), log.data()
+    if prefix is None:
+        return times, data
+    prefix_times, prefix_data = prefix.logs[name]
+    later = times > prefix_times[-1] if prefix_times.size else np.ones(times.size, bool)
+    return (
+        np.concatenate([prefix_times, times[later]]),
+        np.concatenate([prefix_data, data[:, later]], axis=1),
+    )
 
 
 def _when_peaked(

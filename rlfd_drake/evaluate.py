@@ -32,8 +32,8 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import multiprocessing
 import time
+import zlib
 from collections import Counter
 from contextlib import contextmanager
 from dataclasses import asdict, replace
@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rlfd_drake.affinity_pool import AffinityPool
 from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.episode import (
     EpisodeResult,
@@ -278,15 +279,16 @@ def shared_evaluation_workers(workers: int):
     in one pool of processes, spawned once, instead of a pool per evaluation: a
     spawned worker imports pydrake and torch afresh (1.5-4 s an evaluation, against
     about 1 s an episode on two cores; ``rlfd reproduce`` evaluates dozens). A
-    worker sets itself up again whenever an episode comes from another evaluation.
-    Nested blocks with the same count share the outer pool."""
+    worker sets itself up again whenever an episode comes from another evaluation,
+    and keeps the DMP-only first halves of the episodes it ran (``run_episode``'s
+    ``reuse_prefix``): an ``AffinityPool`` sends each start back to the worker that
+    ran it before. Nested blocks with the same count share the outer pool."""
     check_count("workers", workers)
     if workers == 1 or _SHARED_POOL.get("workers") == workers:
         yield
         return
     outer = dict(_SHARED_POOL)
-    ctx = multiprocessing.get_context("spawn")
-    with ctx.Pool(workers) as pool:
+    with AffinityPool(workers) as pool:
         _SHARED_POOL.update(workers=workers, pool=pool)
         try:
             yield
@@ -640,18 +642,21 @@ def evaluate(
         bar.update(1)
         bar.set_postfix(success=f"{success_count}/{bar.n}")
 
+    # A start runs on the worker that ran it before, which kept its DMP-only first
+    # half (run_episode's reuse_prefix).
+    affinities = [zlib.crc32(repr(spec).encode()) for spec in specs]
     try:
         if workers == 1:
             _init_worker(*setup)  # afresh: this process's last evaluation may be older
             for job in jobs:
                 collect(*_run_one(job))
         elif _SHARED_POOL.get("workers") == workers:
-            for index, result in _SHARED_POOL["pool"].imap_unordered(_run_one, jobs):
+            pool = _SHARED_POOL["pool"]
+            for index, result in pool.imap_unordered(_run_one, jobs, affinities):
                 collect(index, result)
         else:
-            ctx = multiprocessing.get_context("spawn")
-            with ctx.Pool(min(workers, episodes)) as pool:
-                for index, result in pool.imap_unordered(_run_one, jobs):
+            with AffinityPool(min(workers, episodes)) as pool:
+                for index, result in pool.imap_unordered(_run_one, jobs, affinities):
                     collect(index, result)
     finally:
         bar.close()

@@ -5,8 +5,16 @@ from __future__ import annotations
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from rlfd_drake.episode import load_task_dmp
+from rlfd_drake.episode import clear_prefix_cache, load_task_dmp
 from rlfd_drake.tasks import load_task
+
+
+@pytest.fixture(autouse=True)
+def _no_episode_start_from_another_test():
+    """Each test starts with an empty cache of episodes' DMP-only first halves
+    (``run_episode``'s ``reuse_prefix``): a test that patches the simulation must not
+    resume from a half simulated by another test."""
+    clear_prefix_cache()
 
 
 @pytest.fixture(scope="session")

@@ -21,8 +21,10 @@ from rlfd_drake.demonstration import load_demonstration
 from rlfd_drake.diagram import (
     LOGGED_OUTPUTS,
     BuildRlfdDiagram,
+    ResumeFromSnapshot,
     RlfdDiagramConfig,
     SetEpisodeStart,
+    SnapshotDiagramState,
 )
 from rlfd_drake.dmp import fit_cartesian_dmp
 from rlfd_drake.episode import EPISODE_LOGS, demo_start_pose
@@ -398,3 +400,34 @@ def test_the_config_chooses_which_outputs_are_logged(peg):
     assert set(kept.logs) == set(EPISODE_LOGS) == {"distance_to_goal", "force_metrics"}
     with pytest.raises(ValueError, match="logged_outputs must be among .*'contact'"):
         RlfdDiagramConfig(logged_outputs=("force_metrics", "contact"))
+
+
+def test_a_snapshot_resumes_in_another_diagram_built_the_same_way(peg):
+    """The state at 0.5 s, put into a fresh diagram of the same task, goes on as the
+    original; a diagram with a stateful subsystem the snapshot lacks is refused."""
+    task, model, X_WP_start = peg
+
+    def started():
+        rlfd = BuildRlfdDiagram(task, model, RlfdDiagramConfig(log_period_s=None))
+        simulator = Simulator(rlfd.diagram)
+        rlfd.diagram.GetInputPort("residual").FixValue(simulator.get_mutable_context(), np.zeros(6))
+        return rlfd, simulator
+
+    rlfd, simulator = started()
+    SetEpisodeStart(rlfd, simulator.get_mutable_context(), X_WP_start)
+    simulator.AdvanceTo(0.5)
+    snapshot = SnapshotDiagramState(rlfd, simulator.get_context())
+    assert snapshot.time_s == 0.5 and "plant" in snapshot.states
+    simulator.AdvanceTo(0.8)
+    other, resumed = started()
+    ResumeFromSnapshot(other, resumed, snapshot)
+    resumed.AdvanceTo(0.8)
+    for name in ("observation", "X_WE_desired", "force_metrics", "phase"):
+        assert np.array_equal(
+            other.diagram.GetOutputPort(name).Eval(resumed.get_context()),
+            rlfd.diagram.GetOutputPort(name).Eval(simulator.get_context()),
+        )
+    incremental = dataclasses.replace(task, residual_rate_per_s=2.0)
+    rate = BuildRlfdDiagram(incremental, model, RlfdDiagramConfig(log_period_s=None))
+    with pytest.raises(ValueError, match="no state of subsystem 'residual_integrator'"):
+        ResumeFromSnapshot(rate, Simulator(rate.diagram), snapshot)

@@ -10,6 +10,7 @@ import pytest
 
 import rlfd_drake.episode as episode_module
 from rlfd_drake.baselines.random_policy import ZeroPolicy
+from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.episode import (
     FAILURE_KINDS,
     EpisodeResult,
@@ -28,9 +29,10 @@ def nominal_result(peg_easy, dmp) -> EpisodeResult:
 
 
 def _comparable(result: EpisodeResult) -> dict:
+    """Every field but the wall time, nan written out (nan != nan)."""
     values = dataclasses.asdict(result)
     values.pop("wall_time_s")
-    return values
+    return {k: "nan" if isinstance(v, float) and math.isnan(v) else v for k, v in values.items()}
 
 
 def test_load_task_dmp_is_cached(peg_easy, dmp):
@@ -223,3 +225,94 @@ def test_make_episode_specs_follow_the_orientation_bins():
 def test_record_html_needs_meshcat(peg_easy, dmp, tmp_path):
     with pytest.raises(ValueError, match="record_html needs a meshcat"):
         run_episode(peg_easy, dmp, EpisodeSpec(), record_html=tmp_path / "episode.html")
+
+
+class _CallCountingPolicy:
+    """A policy with memory: its action depends on how often it was called since its
+    last reset, so an episode that skipped the reset would act otherwise."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.resets = 0
+
+    def reset(self) -> None:
+        self.calls = 0
+        self.resets += 1
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        phase = 0.7 * self.calls
+        return 0.5 * np.array([math.sin(phase), math.cos(phase), -0.2, 0.0, 0.0, 0.3])
+
+
+@pytest.fixture(scope="module")
+def offset_spec(peg_easy) -> EpisodeSpec:
+    """A start from which the DMP alone is still out of the hole at the activation."""
+    return make_episode_specs(peg_easy, 3, 0)[1]
+
+
+def test_an_episode_resumed_from_a_stored_first_half_is_the_same_episode(
+    peg_easy, dmp, offset_spec
+):
+    """The DMP-only first half is kept per process and resumed from, bit for bit: by the
+    DMP alone and by a policy with memory (reset on resuming), from a first half
+    simulated without any policy."""
+    alone = run_episode(peg_easy, dmp, offset_spec, reuse_prefix=False)
+    fresh_policy = _CallCountingPolicy()
+    with_policy = run_episode(peg_easy, dmp, offset_spec, policy=fresh_policy, reuse_prefix=False)
+    assert episode_module.prefix_cache_stats() == {"hits": 0, "stored": 0, "held": 0}
+    stored = run_episode(peg_easy, dmp, offset_spec)
+    assert episode_module.prefix_cache_stats() == {"hits": 0, "stored": 1, "held": 1}
+    resumed_alone = run_episode(peg_easy, dmp, offset_spec)
+    resumed_policy = _CallCountingPolicy()
+    resumed = run_episode(peg_easy, dmp, offset_spec, policy=resumed_policy)
+    assert episode_module.prefix_cache_stats() == {"hits": 2, "stored": 1, "held": 1}
+    assert _comparable(stored) == _comparable(alone)
+    assert _comparable(resumed_alone) == _comparable(alone)
+    assert _comparable(resumed) == _comparable(with_policy)
+    assert resumed_policy.resets == 1 and resumed_policy.calls == fresh_policy.calls > 0
+    assert resumed.final_distance_m != alone.final_distance_m  # the policy did act
+
+
+def test_an_episode_start_is_not_reused_where_the_policy_acts_before_the_activation(
+    peg_easy, dmp, offset_spec
+):
+    """A policy called from the start, or another episode (another start, task or
+    stopping rule), neither stores into nor resumes from the first half of this one."""
+    run_episode(peg_easy, dmp, offset_spec)
+    from_start = RlfdDiagramConfig(residual_policy_from_activation=False)
+    run_episode(peg_easy, dmp, offset_spec, policy=ZeroPolicy(), diagram_config=from_start)
+    run_episode(peg_easy, dmp, offset_spec, stop_after_success_s=None)
+    assert episode_module.prefix_cache_stats() == {"hits": 0, "stored": 2, "held": 2}
+
+
+def test_the_loop_resumes_at_the_last_chunk_half_a_chunk_before_the_activation():
+    ends = episode_module._chunk_ends(10.0, 0.1)
+    assert len(ends) == 100 and ends[-1] == pytest.approx(10.0)  # sums of 0.1, as ever
+    index = episode_module._last_chunk_before(ends, 5.0, 0.1)
+    assert index == 48 and ends[index] == pytest.approx(4.9)
+    assert episode_module._last_chunk_before(ends, 0.0, 0.1) is None
+
+
+def test_episode_keys_tell_apart_what_changes_the_first_half(peg_easy, dmp, offset_spec):
+    config = RlfdDiagramConfig()
+    key = episode_module._prefix_key(peg_easy, dmp, offset_spec, config, 0.1, 0.5)
+    translation = dataclasses.replace(config, residual_mode="translation")
+    assert episode_module._prefix_key(peg_easy, dmp, offset_spec, translation, 0.1, 0.5) == key
+    other_start = dataclasses.replace(offset_spec, start_dp=(0.0, 0.0, 0.001))
+    stiffer = dataclasses.replace(peg_easy, translational_stiffness_N_per_m=2500.0)
+    slower = dataclasses.replace(config, dmp_period_s=0.02)
+    assert (
+        len(
+            {
+                key,
+                episode_module._prefix_key(peg_easy, dmp, other_start, config, 0.1, 0.5),
+                episode_module._prefix_key(stiffer, dmp, offset_spec, config, 0.1, 0.5),
+                episode_module._prefix_key(peg_easy, dmp, offset_spec, slower, 0.1, 0.5),
+                episode_module._prefix_key(peg_easy, dmp, offset_spec, config, 0.1, None),
+            }
+        )
+        == 5
+    )
+    with pytest.raises(TypeError, match="cannot fingerprint a object"):
+        episode_module._fingerprint_parts(object(), [])

@@ -93,10 +93,16 @@ class ResidualPolicy(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
         self.DeclareStateOutputPort("residual", state_index)
 
-    def _initialize(self, context: Context, discrete_state: DiscreteValues) -> None:
+    def ResetPolicy(self) -> None:
+        """Calls the policy's ``reset()`` (recurrent state, observation stack), if it
+        has one: done at every initialisation, and by ``ResumeFromSnapshot``, which
+        skips the initialisation events."""
         reset = getattr(self._policy_object, "reset", None)
         if callable(reset):
             reset()
+
+    def _initialize(self, context: Context, discrete_state: DiscreteValues) -> None:
+        self.ResetPolicy()
         discrete_state.set_value(0, np.zeros(6))
         self._update(context, discrete_state)
 
