@@ -264,7 +264,13 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
 
     from rlfd_drake.diagram import RlfdDiagramConfig
     from rlfd_drake.episode import load_task_dmp, make_episode_specs, run_episode
-    from rlfd_drake.evaluate import evaluate, make_policy, trained_mode, write_evaluation
+    from rlfd_drake.evaluate import (
+        evaluate,
+        make_policy,
+        shared_evaluation_workers,
+        trained_mode,
+        write_evaluation,
+    )
     from rlfd_drake.paths import models_dir
     from rlfd_drake.results import results_dir, write_result
     from rlfd_drake.tasks import load_task
@@ -282,21 +288,23 @@ def _cmd_demo_main(args: argparse.Namespace) -> int:
     if len(policies) == 1:
         print(f"      no trained residual at {policy_path}: running the DMP alone")
     rows = {}
-    for step, spec in enumerate(policies, start=2):
-        label = "DMP only" if spec == "dmp" else "rLfD (DMP + residual)"
-        print(f"[{step}/4] {label} on {args.episodes} perturbed starts (seed {args.seed})")
-        result = evaluate(
-            task.name,
-            spec,
-            args.episodes,
-            args.seed,
-            workers=args.workers,
-            grid=False,
-            residual_mode=residual_mode,
-        )
-        name = f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}"
-        write_evaluation(result, name, plot=True)
-        rows[label] = result
+    # One pool for both: rLfD's episodes resume from the DMP's first halves.
+    with shared_evaluation_workers(args.workers):
+        for step, spec in enumerate(policies, start=2):
+            label = "DMP only" if spec == "dmp" else "rLfD (DMP + residual)"
+            print(f"[{step}/4] {label} on {args.episodes} perturbed starts (seed {args.seed})")
+            result = evaluate(
+                task.name,
+                spec,
+                args.episodes,
+                args.seed,
+                workers=args.workers,
+                grid=False,
+                residual_mode=residual_mode,
+            )
+            name = f"demo_{task.name}_{'dmp' if spec == 'dmp' else 'rlfd'}"
+            write_evaluation(result, name, plot=True)
+            rows[label] = result
     print()
     print(f"{'policy':<24}{'success %':>10}{'insert s':>10}{'peak N':>9}{'mean N':>9}")
     for label, result in rows.items():
