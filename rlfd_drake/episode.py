@@ -283,7 +283,8 @@ class _EpisodePrefix:
 #: The DMP-only starts of recent episodes, by ``_prefix_key``, least recently used
 #: first (per process: a snapshot holds Drake values that do not pickle).
 _PREFIX_CACHE: OrderedDict[str, _EpisodePrefix] = OrderedDict()
-#: About 30 kB a prefix (two logs of 5 s at 100 Hz and the plant's step memory).
+#: About 35 kB a prefix (two logs of 4.9 s at 100 Hz and the plant's step memory;
+#: results/probes/memory_per_episode.md).
 _PREFIX_CACHE_SIZE = 512
 _PREFIX_STATS = {"hits": 0, "stored": 0}
 
@@ -524,7 +525,7 @@ def run_episode(
                 and t - within_since >= stop_after_success_s - 1e-9
             ):
                 break
-            if index == prefix_index and prefix is None:
+            if index == prefix_index:  # reached only when not resumed
                 _store_prefix(key, index, rlfd, context, latched_at, within_since)
     except RuntimeError as e:
         message = _first_line(e)
