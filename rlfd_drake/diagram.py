@@ -28,7 +28,14 @@ from pydrake.systems.primitives import Gain, LogVectorOutput, PassThrough, Vecto
 
 from rlfd_drake.control_math import COMPOSITIONS
 from rlfd_drake.dmp import CartesianDmp
-from rlfd_drake.scene import AddRlfdScene, Scene, SceneConfig, SolvePandaIK
+from rlfd_drake.scene import (
+    AddRlfdScene,
+    GoalPoseInWorld,
+    Scene,
+    SceneConfig,
+    SetFixtureError,
+    SolvePandaIK,
+)
 from rlfd_drake.systems.composer import ResidualComposer, ResidualComposerConfig
 from rlfd_drake.systems.dmp_system import DmpSystem
 from rlfd_drake.systems.extrapolator import QuinticExtrapolator, QuinticExtrapolatorConfig
@@ -204,6 +211,7 @@ class RlfdDiagram:
     observer: Observer
     residual_policy: ResidualPolicy | None
     logs: dict[str, VectorLogSink]
+    coupling_policy: ResidualPolicy | None
     X_WGoal_nominal: RigidTransform
     meshcat: Meshcat | None = None
     view_config: EpisodeViewConfig | None = None
@@ -252,7 +260,9 @@ def BuildRlfdDiagram(
             at the residual's rate from t = 0; a unit value is the C_t that moves the
             DMP's rest point by ``max_translation_m`` / ``max_rotation_rad`` (C_t /
             (alpha_z beta_z)). None leaves the coupling input unconnected (C_t = 0).
-        fixture_error: X_err, calibration error of the fixture (None = none).
+        fixture_error: X_err, calibration error of the fixture (None = none): the
+            default of the fixture's pose parameter; ``SetEpisodeFixture`` moves the
+            fixture in a context without rebuilding.
         meshcat: if given, the scene, the hydroelastic contact surfaces and forces, the
             nominal and true goals and (as triads that follow them) the corrected and the
             DMP's set-points are drawn; ``SetEpisodeStart`` draws the DMP's plan (see
@@ -329,7 +339,8 @@ def BuildRlfdDiagram(
             plant,
             scene.part_body.index(),
             RigidTransform(),
-            scene.X_WGoal,
+            scene.frame_goal.body().index(),
+            scene.frame_goal.GetFixedPoseInBodyFrame(),
             X_WGoal_nominal,
             scene.part_weld.index(),
             scene.panda,
@@ -419,6 +430,7 @@ def BuildRlfdDiagram(
         connect(residual_source, residual_filter.get_input_port())
         composer_residual = residual_filter.get_output_port()
     connect(composer_residual, composer.GetInputPort("residual"))
+    coupling = None
     if coupling_policy is not None:
         coupling = builder.AddNamedSystem(
             "coupling_policy",
@@ -482,7 +494,8 @@ def BuildRlfdDiagram(
             ),
         )
         connect(extrapolator.GetOutputPort("X_WE_desired"), base.GetInputPort("X_WE"))
-        DrawGoals(meshcat, X_WGoal_nominal, scene.X_WGoal, view_config)
+        X_WGoal_true = GoalPoseInWorld(scene, plant.CreateDefaultContext())
+        DrawGoals(meshcat, X_WGoal_nominal, X_WGoal_true, view_config)
 
     diagram = builder.Build()
     diagram.set_name(f"rlfd_{task.name}")
@@ -498,6 +511,7 @@ def BuildRlfdDiagram(
         observer=observer,
         residual_policy=residual_policy,
         logs=logs,
+        coupling_policy=coupling,
         X_WGoal_nominal=X_WGoal_nominal,
         meshcat=meshcat,
         view_config=view_config,
@@ -525,6 +539,19 @@ def SetEpisodeStart(
     if rlfd.meshcat is not None:
         DrawDmpPlan(rlfd.meshcat, rlfd.dmp.model, X_WP, rlfd.task.episode_time_s, rlfd.view_config)
     return q
+
+
+def SetEpisodeFixture(
+    rlfd: RlfdDiagram, context: Context, fixture_error: RigidTransform | None
+) -> None:
+    """Puts the fixture at its nominal pose times ``fixture_error`` (None = no error)
+    in ``context`` (a root context of ``rlfd.diagram``): the diagram is built once and
+    each episode moves the fixture (and, with a Meshcat, redraws the true goal)."""
+    plant_context = rlfd.scene.plant.GetMyMutableContextFromRoot(context)
+    SetFixtureError(rlfd.scene, plant_context, fixture_error)
+    if rlfd.meshcat is not None:
+        X_WGoal_true = GoalPoseInWorld(rlfd.scene, plant_context)
+        DrawGoals(rlfd.meshcat, rlfd.X_WGoal_nominal, X_WGoal_true, rlfd.view_config)
 
 
 def PoseFromOffset(X_WP_nominal: RigidTransform, dp: np.ndarray, dq_wxyz: np.ndarray):
@@ -577,8 +604,9 @@ def ResumeFromSnapshot(
     was taken, in another diagram built the same way, and initialises it without the
     initialisation events (which would restart the DMP, the controller's filter and
     the observer's peaks): the simulation then goes on bit for bit as the one the
-    snapshot was taken from. The diagram's geometry (its parameters) is its own, so the
-    two must have been built from the same task, fixture error and configuration.
+    snapshot was taken from. Parameters are not copied (the geometry is each diagram's
+    own): the diagram must have been built from the same task and configuration, and
+    its fixture put where the snapshot's was (``SetEpisodeFixture``) beforehand.
 
     A ``ResidualPolicy`` missing from the snapshot (taken without a policy, or with
     another one) starts from its initial state, its policy reset: right only while

@@ -23,7 +23,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from pydrake.gym import DrakeGymEnv
+from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context
 
 from rlfd_drake.control_math import PEAK_FORCE_SIGNALS, pad_residual_part
 from rlfd_drake.diagram import (
@@ -33,11 +35,12 @@ from rlfd_drake.diagram import (
     PoseFromOffset,
     RlfdDiagram,
     RlfdDiagramConfig,
+    SetEpisodeFixture,
     SetEpisodeStart,
 )
 from rlfd_drake.episode import demo_start_pose, load_task_dmp
 from rlfd_drake.geometry import quat_from_rotation_vector, rotation_vector_from_quat
-from rlfd_drake.scene import FixtureErrorTransform
+from rlfd_drake.scene import FixtureErrorTransform, GoalPoseInWorld
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
 from rlfd_drake.tasks import TaskSpec, load_task, sample_fixture_error, sample_start_offset
 
@@ -363,14 +366,16 @@ class RlfdEnv(DrakeGymEnv):
             from pydrake.geometry import StartMeshcat
 
             self._meshcat = StartMeshcat()
-        self.rlfd = BuildRlfdDiagram(
-            self.task,
-            self.dmp_model,
-            self.diagram_config,
-            fixture_error=FixtureErrorTransform(setup.fixture_dp, setup.fixture_dq),
-            meshcat=self._meshcat,
-        )
-        return Simulator(self.rlfd.diagram)
+        if self.rlfd is None:
+            # Built once, the fixture moved per episode: pydrake never frees a diagram
+            # holding a Python system (results/probes/memory_per_episode.md).
+            self.rlfd = BuildRlfdDiagram(
+                self.task, self.dmp_model, self.diagram_config, meshcat=self._meshcat
+            )
+        simulator = Simulator(self.rlfd.diagram)
+        fixture_error = FixtureErrorTransform(setup.fixture_dp, setup.fixture_dq)
+        SetEpisodeFixture(self.rlfd, simulator.get_mutable_context(), fixture_error)
+        return simulator
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         gym.Env.reset(self, seed=seed)
@@ -512,7 +517,7 @@ class RlfdEnv(DrakeGymEnv):
             return 0.0
         error, _ = self._part_error()
         if self.distance_shaping_axes != "all":
-            error_goal = self.rlfd.scene.X_WGoal.rotation().inverse() @ error
+            error_goal = self._true_goal().rotation().inverse() @ error
             error = error_goal[:2]
             if self.distance_shaping_axes == "lateral_depth":
                 depth = min(abs(float(error_goal[2])), self.task.fixture.depth_m)
@@ -520,12 +525,17 @@ class RlfdEnv(DrakeGymEnv):
         l1_units = float(np.sum(np.abs(error))) / SHAPING_DISTANCE_UNIT_M
         return -self.distance_shaping * l1_units
 
+    def _plant_context(self) -> Context:
+        return self.rlfd.scene.plant.GetMyContextFromRoot(self.simulator.get_context())
+
+    def _true_goal(self) -> RigidTransform:
+        """X_WGoal_true: the goal on the fixture where this episode put it."""
+        return GoalPoseInWorld(self.rlfd.scene, self._plant_context())
+
     def _part_error(self) -> tuple[np.ndarray, float]:
         """(p_WP - p_WGoal_true (3,) m, angle between R_WP and R_WGoal_true in deg)."""
-        plant = self.rlfd.scene.plant
-        plant_context = plant.GetMyContextFromRoot(self.simulator.get_context())
-        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context)
-        X_WGoal = self.rlfd.scene.X_WGoal
+        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(self._plant_context())
+        X_WGoal = self._true_goal()
         angle = X_WGoal.rotation().InvertAndCompose(X_WP.rotation()).ToAngleAxis().angle()
         return X_WP.translation() - X_WGoal.translation(), float(np.degrees(angle))
 
@@ -534,10 +544,8 @@ class RlfdEnv(DrakeGymEnv):
         the fixture's *true* goal, in the goal's frame, and the fixture's calibration
         error of this episode. Not part of the observation (the paper's policy does not
         know the fixture's error); for a critic trained in simulation only."""
-        plant = self.rlfd.scene.plant
-        plant_context = plant.GetMyContextFromRoot(self.simulator.get_context())
-        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(plant_context)
-        X_GoalP = self.rlfd.scene.X_WGoal.InvertAndCompose(X_WP)
+        X_WP = self.rlfd.scene.frame_P.CalcPoseInWorld(self._plant_context())
+        X_GoalP = self._true_goal().InvertAndCompose(X_WP)
         state = np.concatenate(
             [
                 X_GoalP.translation(),

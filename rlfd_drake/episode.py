@@ -36,13 +36,15 @@ from rlfd_drake.diagram import (
     MakeSimulator,
     PoseFromOffset,
     ResumeFromSnapshot,
+    RlfdDiagram,
     RlfdDiagramConfig,
+    SetEpisodeFixture,
     SetEpisodeStart,
     SnapshotDiagramState,
 )
 from rlfd_drake.dmp import CartesianDmp, DmpConfig, fit_cartesian_dmp
 from rlfd_drake.geometry import quat_normalize
-from rlfd_drake.scene import FixtureErrorTransform
+from rlfd_drake.scene import FixtureErrorTransform, FixturePoseInWorld, GoalPoseInWorld
 from rlfd_drake.tasks import TaskSpec, evaluation_grid, sample_fixture_error, sample_start_offset
 
 __all__ = [
@@ -52,7 +54,9 @@ __all__ = [
     "EPISODE_LOGS",
     "load_task_dmp",
     "make_episode_specs",
+    "clear_diagram_cache",
     "clear_prefix_cache",
+    "diagram_cache_stats",
     "prefix_cache_stats",
     "run_episode",
 ]
@@ -343,6 +347,67 @@ def _prefix_key(
     return hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
 
 
+#: Diagrams ``run_episode`` built, reused by later episodes of the same task, DMP,
+#: configuration and kind of policy (their policies swapped in, the fixture moved by a
+#: context parameter): pydrake 1.51 never frees a diagram holding a Python system,
+#: so a diagram per episode grew each process by about 1.5 MB an episode
+#: (results/probes/memory_per_episode.md). An evicted diagram's memory stays taken.
+_DIAGRAM_CACHE: OrderedDict[str, RlfdDiagram] = OrderedDict()
+_DIAGRAM_CACHE_SIZE = 16
+_DIAGRAM_STATS = {"built": 0, "reused": 0}
+
+
+def diagram_cache_stats() -> dict[str, int]:
+    """This process's counts of diagrams ``run_episode`` built ("built") and of
+    episodes that reused one ("reused"), and the number held ("held")."""
+    return {**_DIAGRAM_STATS, "held": len(_DIAGRAM_CACHE)}
+
+
+def clear_diagram_cache() -> None:
+    """Forgets the diagrams kept for reuse and zeroes the counts."""
+    _DIAGRAM_CACHE.clear()
+    _DIAGRAM_STATS.update(built=0, reused=0)
+
+
+def _episode_diagram(
+    task: TaskSpec,
+    dmp_model: CartesianDmp,
+    config: RlfdDiagramConfig,
+    policy: Callable[[np.ndarray], np.ndarray] | None,
+    coupling_policy: Callable[[np.ndarray], np.ndarray] | None,
+) -> RlfdDiagram:
+    """A diagram for an episode without a Meshcat: a kept one with the policies and
+    the DMP's forcing weights swapped in, else a new one (then kept). Its fixture is
+    put by the episode."""
+    unweighted = replace(
+        dmp_model,
+        weights_translation=np.zeros_like(dmp_model.weights_translation),
+        weights_orientation=np.zeros_like(dmp_model.weights_orientation),
+    )
+    parts: list[bytes] = []
+    for value in (task, unweighted, config, policy is None, coupling_policy is None):
+        _fingerprint_parts(value, parts)
+    key = hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
+    rlfd = _DIAGRAM_CACHE.get(key)
+    if rlfd is None:
+        rlfd = BuildRlfdDiagram(
+            task, dmp_model, config, policy=policy, coupling_policy=coupling_policy
+        )
+        _DIAGRAM_CACHE[key] = rlfd
+        _DIAGRAM_STATS["built"] += 1
+        while len(_DIAGRAM_CACHE) > _DIAGRAM_CACHE_SIZE:
+            _DIAGRAM_CACHE.popitem(last=False)
+        return rlfd
+    _DIAGRAM_CACHE.move_to_end(key)
+    _DIAGRAM_STATS["reused"] += 1
+    rlfd.dmp.SetForcingWeights(dmp_model)
+    if policy is not None:
+        rlfd.residual_policy.SetPolicy(policy)
+    if coupling_policy is not None:
+        rlfd.coupling_policy.SetPolicy(coupling_policy)
+    return rlfd
+
+
 def _chunk_ends(t_end: float, chunk_s: float) -> list[float]:
     """The times the episode loop advances to: ``chunk_s`` added up to ``t_end``."""
     ends = []
@@ -376,6 +441,12 @@ def run_episode(
     reuse_prefix: bool = True,
 ) -> EpisodeResult:
     """Runs one episode and measures it.
+
+    Without a Meshcat the diagram is one kept by this process for the task, DMP (up to
+    its forcing weights) and configuration, with the policy swapped in and the fixture
+    moved by a context parameter, in a new simulator and context: the same episode as
+    in a diagram built for it (``tests/test_episode.py``), without the memory a
+    diagram per episode kept (``diagram_cache_stats``).
 
     Args:
         task: the task.
@@ -422,20 +493,24 @@ def run_episode(
     # observation's alone is about 3 % of an episode).
     config = replace(config, logged_outputs=EPISODE_LOGS)
     X_err = FixtureErrorTransform(np.asarray(spec.fixture_dp), np.asarray(spec.fixture_dq))
-    rlfd = BuildRlfdDiagram(
-        task,
-        dmp_model,
-        config,
-        policy=policy,
-        coupling_policy=coupling_policy,
-        fixture_error=X_err,
-        meshcat=meshcat,
-    )
+    if meshcat is None:
+        rlfd = _episode_diagram(task, dmp_model, config, policy, coupling_policy)
+    else:
+        rlfd = BuildRlfdDiagram(
+            task,
+            dmp_model,
+            config,
+            policy=policy,
+            coupling_policy=coupling_policy,
+            fixture_error=X_err,
+            meshcat=meshcat,
+        )
     diagram = rlfd.diagram
     simulator = MakeSimulator(rlfd)
     if realtime_rate is not None:
         simulator.set_target_realtime_rate(realtime_rate)
     context = simulator.get_mutable_context()
+    SetEpisodeFixture(rlfd, context, X_err)
     if policy is None:
         diagram.GetInputPort("residual").FixValue(context, np.zeros(RESIDUAL_SIZE))
 
@@ -567,7 +642,7 @@ def run_episode(
     }
     plant = rlfd.scene.plant
     X_WP = rlfd.scene.frame_P.CalcPoseInWorld(plant.GetMyContextFromRoot(context))
-    X_WGoal = rlfd.scene.X_WGoal
+    X_WGoal = GoalPoseInWorld(rlfd.scene, plant.GetMyContextFromRoot(context))
     metrics["final_distance_m"] = float(np.linalg.norm(X_WP.translation() - X_WGoal.translation()))
     metrics["final_angle_deg"] = math.degrees(
         X_WGoal.rotation().InvertAndCompose(X_WP.rotation()).ToAngleAxis().angle()
@@ -582,7 +657,8 @@ def run_episode(
         return result(reason, False, **metrics)
     latched = bool(success_port.Eval(context)[0] > 0.5) or reached.size > 0
     if not latched:
-        return result(_final_failure_kind(task, rlfd.scene.X_WFixture_true, X_WP), False, **metrics)
+        X_WF = FixturePoseInWorld(rlfd.scene, plant.GetMyContextFromRoot(context))
+        return result(_final_failure_kind(task, X_WF, X_WP), False, **metrics)
     if task.kappa_deg is not None and metrics["final_angle_deg"] > task.kappa_deg:
         angle = metrics["final_angle_deg"]
         return result(f"orientation: {angle:.1f} deg > {task.kappa_deg:g} deg", False, **metrics)

@@ -71,6 +71,7 @@ from rlfd_drake.tasks import PoseSpec, TaskSpec
 
 PART_BODY = "part"
 FIXTURE_BODY = "fixture"
+FIXTURE_MOUNT_FRAME = "fixture_mount"
 GOAL_FRAME = "goal"
 
 
@@ -413,9 +414,13 @@ class Scene:
             frame G on the fixture (X_FG = task.X_FP_goal).
         hand_frame: the ``panda_hand`` body frame H.
         X_HP: grasp, pose of P in H.
+        fixture_mount: the frame on the world that F is welded to; its pose in the
+            world is a parameter of the plant's context, X_WFixture_nominal * X_err
+            (``SetFixtureError``), so one diagram serves every fixture error.
         X_WFixture_nominal: nominal pose of F (what the demonstration saw).
-        X_WFixture_true: actual pose of F (nominal * fixture error).
-        X_WGoal: actual goal pose of P in the world (X_WFixture_true * X_FP_goal).
+
+    The actual poses of F and of the goal depend on the context:
+    ``FixturePoseInWorld`` and ``GoalPoseInWorld``.
     """
 
     plant: MultibodyPlant
@@ -432,9 +437,8 @@ class Scene:
     frame_goal: Frame
     hand_frame: Frame
     X_HP: RigidTransform
+    fixture_mount: Frame
     X_WFixture_nominal: RigidTransform
-    X_WFixture_true: RigidTransform
-    X_WGoal: RigidTransform
 
 
 def PoseSpecToRigidTransform(pose: PoseSpec) -> RigidTransform:
@@ -488,7 +492,13 @@ def AddRlfdScene(
     fixture_body = plant.GetBodyByName(FIXTURE_BODY, fixture)
     X_WF_nominal = PoseSpecToRigidTransform(task.X_WFixture)
     X_WF_true = X_WF_nominal if fixture_error is None else X_WF_nominal @ fixture_error
-    plant.WeldFrames(plant.world_frame(), fixture_body.body_frame(), X_WF_true)
+    # Welded through a frame whose pose is a context parameter: the fixture moves
+    # without rebuilding the diagram (pydrake never frees a diagram holding a Python
+    # system, so rebuilding per episode grows the process; results/probes/).
+    fixture_mount = plant.AddFrame(
+        FixedOffsetFrame(FIXTURE_MOUNT_FRAME, plant.world_frame(), X_WF_true)
+    )
+    plant.WeldFrames(fixture_mount, fixture_body.body_frame(), RigidTransform())
     X_FG = PoseSpecToRigidTransform(task.X_FP_goal)
     frame_goal = plant.AddFrame(FixedOffsetFrame(GOAL_FRAME, fixture_body.body_frame(), X_FG))
 
@@ -510,10 +520,30 @@ def AddRlfdScene(
         frame_goal=frame_goal,
         hand_frame=hand_frame,
         X_HP=X_HP,
+        fixture_mount=fixture_mount,
         X_WFixture_nominal=X_WF_nominal,
-        X_WFixture_true=X_WF_true,
-        X_WGoal=X_WF_true @ X_FG,
     )
+
+
+def SetFixtureError(
+    scene: Scene, plant_context: Context, fixture_error: RigidTransform | None
+) -> None:
+    """Puts the fixture at X_WFixture_nominal * fixture_error (None = no error) in
+    ``plant_context`` (the scene's plant's context)."""
+    X_WF = scene.X_WFixture_nominal
+    scene.fixture_mount.SetPoseInParentFrame(
+        plant_context, X_WF if fixture_error is None else X_WF @ fixture_error
+    )
+
+
+def FixturePoseInWorld(scene: Scene, plant_context: Context) -> RigidTransform:
+    """X_WF, the fixture's actual pose in ``plant_context``."""
+    return scene.frame_F.CalcPoseInWorld(plant_context)
+
+
+def GoalPoseInWorld(scene: Scene, plant_context: Context) -> RigidTransform:
+    """X_WGoal, the part's actual goal pose in ``plant_context`` (X_WF * X_FP_goal)."""
+    return scene.frame_goal.CalcPoseInWorld(plant_context)
 
 
 def _AddTable(

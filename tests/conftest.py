@@ -5,16 +5,18 @@ from __future__ import annotations
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from rlfd_drake.episode import clear_prefix_cache, load_task_dmp
+from rlfd_drake.episode import clear_diagram_cache, clear_prefix_cache, load_task_dmp
 from rlfd_drake.tasks import load_task
 
 
 @pytest.fixture(autouse=True)
 def _no_episode_start_from_another_test():
-    """Each test starts with an empty cache of episodes' DMP-only first halves
-    (``run_episode``'s ``reuse_prefix``): a test that patches the simulation must not
-    resume from a half simulated by another test."""
+    """Each test starts with empty caches of episodes' DMP-only first halves
+    (``run_episode``'s ``reuse_prefix``) and of built diagrams: a test that patches the
+    simulation must not resume from a half simulated, or reuse a diagram built, by
+    another test."""
     clear_prefix_cache()
+    clear_diagram_cache()
 
 
 @pytest.fixture(scope="session")

@@ -1,5 +1,7 @@
 """DmpSystem in a Drake Simulator reproduces dmp.rollout; start pose from port or setter."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -146,3 +148,14 @@ def test_phase_stopping_off_or_within_the_deadband_is_the_paper_dmp(model):
         DmpSystem(model, phase_stop_gain_per_m2=-1.0)
     with pytest.raises(ValueError, match="deadband_m"):
         DmpSystem(model, phase_stop_gain_per_m2=1.0, phase_stop_deadband_m=-0.001)
+
+
+def test_forcing_weights_are_swapped_and_nothing_else(model):
+    """One diagram serves the episodic baselines' rollouts: only the weights change."""
+    system, simulator = build(model)
+    other = dmp.with_weights(model, 2.0 * dmp.get_weights(model))
+    system.SetForcingWeights(other)
+    assert system.model is other
+    moved = dataclasses.replace(model, y0=model.y0 + 0.01)
+    with pytest.raises(ValueError, match="only the forcing weights may change: y0"):
+        system.SetForcingWeights(moved)

@@ -61,6 +61,26 @@ def test_same_seed_same_episode_and_different_seed_differs():
     assert not np.array_equal(info_a["start_dp"], info_c["start_dp"])
 
 
+def test_resets_move_the_fixture_in_one_diagram():
+    """The env builds its diagram once (pydrake never frees one holding a Python
+    system) and moves the fixture at each reset: an episode after other episodes is
+    the one a new env runs from the same start and fixture error."""
+    actions = np.random.default_rng(1).uniform(-1, 1, (4, 6)).astype(np.float32)
+    env = make_env()
+    _rollout(env, 5, actions)
+    diagram = env.rlfd.diagram
+    used, info = _rollout(env, 6, actions)
+    assert env.rlfd.diagram is diagram
+    options = {k: info[k] for k in ("start_dp", "start_dq", "fixture_dp", "fixture_dq")}
+    new_env = make_env()
+    obs, _ = new_env.reset(seed=6, options=options)
+    trace = [obs] + [new_env.step(action)[0] for action in actions[: len(used) - 1]]
+    np.testing.assert_array_equal(used, np.array(trace))
+    np.testing.assert_array_equal(
+        env._true_goal().GetAsMatrix4(), new_env._true_goal().GetAsMatrix4()
+    )
+
+
 def test_info_handler_is_not_dropped():
     env = make_env(info_handler=lambda simulator: {"sim_time": simulator.get_context().get_time()})
     _, info = env.reset(seed=0)

@@ -11,6 +11,7 @@ import pytest
 import rlfd_drake.episode as episode_module
 from rlfd_drake.baselines.random_policy import ZeroPolicy
 from rlfd_drake.diagram import RlfdDiagramConfig
+from rlfd_drake.dmp import get_weights, with_weights
 from rlfd_drake.episode import (
     FAILURE_KINDS,
     EpisodeResult,
@@ -316,3 +317,30 @@ def test_episode_keys_tell_apart_what_changes_the_first_half(peg_easy, dmp, offs
     )
     with pytest.raises(TypeError, match="cannot fingerprint a object"):
         episode_module._fingerprint_parts(object(), [])
+
+
+def test_a_kept_diagram_runs_the_same_episodes_as_a_new_one(peg_easy, dmp):
+    """Episodes reuse one diagram per task, configuration and kind of policy: the
+    fixture moved by its context parameter, the policy and the DMP's forcing weights
+    swapped in. Each episode is the one a diagram built for it runs."""
+    specs = make_episode_specs(peg_easy, 3, 0)
+    assert len({tuple(s.fixture_dp) for s in specs}) == 3
+    policy_a, policy_b = _CallCountingPolicy(), _CallCountingPolicy()
+    reweighted = with_weights(dmp, 1.05 * get_weights(dmp))
+    runs = [
+        (specs[0], dmp, None),
+        (specs[1], dmp, policy_a),
+        (specs[2], dmp, policy_b),
+        (specs[1], dmp, None),
+        (specs[2], reweighted, None),
+    ]
+    kept = [run_episode(peg_easy, m, s, policy=p, reuse_prefix=False) for s, m, p in runs]
+    assert episode_module.diagram_cache_stats() == {"built": 2, "reused": 3, "held": 2}
+    for (spec, model, policy), result in list(zip(runs, kept, strict=True))[2:]:
+        episode_module.clear_diagram_cache()
+        fresh_policy = None if policy is None else _CallCountingPolicy()
+        new = run_episode(peg_easy, model, spec, policy=fresh_policy, reuse_prefix=False)
+        assert episode_module.diagram_cache_stats()["built"] == 1
+        assert _comparable(result) == _comparable(new)
+    assert kept[2].final_distance_m != kept[1].final_distance_m
+    assert kept[4].peak_force_n != kept[3].peak_force_n  # the weights did change the DMP

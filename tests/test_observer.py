@@ -91,6 +91,7 @@ def _build(tip_setpoint_below_m: float, goal_offset_m: float, kappa_m: float = 0
             plant,
             part.index(),
             X_BP,
+            plant.world_body().index(),
             X_WGoal_true,
             X_WGoal_nominal,
             weld.index(),

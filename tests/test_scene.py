@@ -13,11 +13,16 @@ from pydrake.systems.framework import DiagramBuilder
 from rlfd_drake.bench.sim import BuildHeldScene, p_FP, press_setup
 from rlfd_drake.paths import models_dir
 from rlfd_drake.scene import (
+    FIXTURE_BODY,
     AddRlfdScene,
     CalcPartPose,
     CalcWristWrench,
     FixtureErrorTransform,
+    FixturePoseInWorld,
+    GoalPoseInWorld,
+    PoseSpecToRigidTransform,
     SceneConfig,
+    SetFixtureError,
     SolvePandaIK,
     TaskModelFiles,
 )
@@ -85,16 +90,16 @@ def test_builds_with_frames_and_ik(name):
     diagram = builder.Build()
     plant = scene.plant
     assert plant.num_positions() == 7 and plant.num_actuators() == 7
-    X_FG = scene.X_WFixture_true.inverse() @ scene.X_WGoal
-    assert X_FG.translation() == pytest.approx([0.0, 0.0, -task.fixture.depth_m])
     context = plant.GetMyMutableContextFromRoot(diagram.CreateDefaultContext())
-    q = SolvePandaIK(scene, scene.X_WGoal)
+    X_WGoal = GoalPoseInWorld(scene, context)
+    X_FG = FixturePoseInWorld(scene, context).inverse() @ X_WGoal
+    assert X_FG.translation() == pytest.approx([0.0, 0.0, -task.fixture.depth_m])
+    q = SolvePandaIK(scene, X_WGoal)
     plant.SetPositions(context, q)
     X_WP = CalcPartPose(plant, context, scene)
-    assert np.linalg.norm(X_WP.translation() - scene.X_WGoal.translation()) < 2e-5
-    angle = X_WP.rotation().InvertAndCompose(scene.X_WGoal.rotation()).ToAngleAxis().angle()
+    assert np.linalg.norm(X_WP.translation() - X_WGoal.translation()) < 2e-5
+    angle = X_WP.rotation().InvertAndCompose(X_WGoal.rotation()).ToAngleAxis().angle()
     assert angle < 2e-4
-    assert scene.frame_goal.CalcPoseInWorld(context).IsNearlyEqualTo(scene.X_WGoal, 1e-12)
     X_WH = scene.hand_frame.CalcPoseInWorld(context)
     assert (X_WH @ scene.X_HP).IsNearlyEqualTo(X_WP, 1e-12)
     # Hand points down: its z axis is -z of the world.
@@ -106,10 +111,42 @@ def test_fixture_error_is_applied():
     dp, dq = sample_fixture_error(task, np.random.default_rng(1))
     X_err = FixtureErrorTransform(dp, dq)
     scene = AddRlfdScene(DiagramBuilder(), task, SceneConfig(), X_err)
-    assert scene.X_WFixture_true.IsNearlyEqualTo(scene.X_WFixture_nominal @ X_err, 1e-12)
-    assert not scene.X_WFixture_true.IsNearlyEqualTo(scene.X_WFixture_nominal, 1e-6)
-    slope = RollPitchYaw(scene.X_WFixture_true.rotation()).pitch_angle()
+    context = scene.plant.CreateDefaultContext()
+    X_WF = FixturePoseInWorld(scene, context)
+    assert X_WF.IsNearlyEqualTo(scene.X_WFixture_nominal @ X_err, 1e-12)
+    assert not X_WF.IsNearlyEqualTo(scene.X_WFixture_nominal, 1e-6)
+    slope = RollPitchYaw(X_WF.rotation()).pitch_angle()
     assert abs(np.degrees(slope)) == pytest.approx(1.0, abs=1.0 + 1e-6)
+
+
+def test_the_fixture_moves_with_its_context_parameter():
+    """One built scene serves every fixture error: SetFixtureError moves the fixture
+    body, its collision geometry as the scene graph sees it, and the goal frame."""
+    task = load_task("peg", check_demo=False)
+    builder = DiagramBuilder()
+    scene = AddRlfdScene(builder, task)
+    diagram = builder.Build()
+    fixture_body = scene.plant.GetBodyByName(FIXTURE_BODY, scene.fixture)
+    geometry = scene.plant.GetCollisionGeometriesForBody(fixture_body)[0]
+
+    def geometry_pose(root):
+        query = scene.scene_graph.get_query_output_port()
+        return query.Eval(scene.scene_graph.GetMyContextFromRoot(root)).GetPoseInWorld(geometry)
+
+    X_WGeometry_nominal = geometry_pose(diagram.CreateDefaultContext())
+    root = diagram.CreateDefaultContext()
+    context = scene.plant.GetMyMutableContextFromRoot(root)
+    X_err = FixtureErrorTransform([0.002, -0.001, 0.0005], [0.9999, 0.0, 0.0, 0.0141])
+    SetFixtureError(scene, context, X_err)
+    X_WF = scene.X_WFixture_nominal @ X_err
+    assert FixturePoseInWorld(scene, context).IsNearlyEqualTo(X_WF, 1e-15)
+    X_FG = PoseSpecToRigidTransform(task.X_FP_goal)
+    assert GoalPoseInWorld(scene, context).IsNearlyEqualTo(X_WF @ X_FG, 1e-15)
+    X_FGeometry = scene.X_WFixture_nominal.inverse() @ X_WGeometry_nominal
+    assert geometry_pose(root).IsNearlyEqualTo(X_WF @ X_FGeometry, 1e-12)
+    assert not geometry_pose(root).IsNearlyEqualTo(X_WGeometry_nominal, 1e-4)
+    SetFixtureError(scene, context, None)
+    assert FixturePoseInWorld(scene, context).IsNearlyEqualTo(scene.X_WFixture_nominal, 1e-15)
 
 
 def _press(name: str, lateral_m: float, yaw_deg: float = 0.0, duration_s: float = 1.5):
@@ -174,9 +211,13 @@ def test_wrist_wrench_is_part_weight_at_rest():
     task = load_task("peg", check_demo=False)
     held = BuildHeldScene(task)
     scene = held.scene
-    X_WP = RigidTransform(scene.X_WGoal.rotation(), scene.X_WFixture_true @ [0.0, 0.0, 0.05])
-    q = SolvePandaIK(scene, X_WP)
     context = held.diagram.CreateDefaultContext()
+    plant_context = held.plant_context(context)
+    X_WP = RigidTransform(
+        GoalPoseInWorld(scene, plant_context).rotation(),
+        FixturePoseInWorld(scene, plant_context) @ [0.0, 0.0, 0.05],
+    )
+    q = SolvePandaIK(scene, X_WP)
     scene.plant.SetPositions(held.plant_context(context), q)
     held.set_target(context, q)
     simulator = Simulator(held.diagram, context)

@@ -401,7 +401,7 @@ def test_distance_shaping_pays_the_discounted_change_of_the_distance_potential()
     )
     lateral_env = RlfdEnv(**{**_env_kwargs(lateral_config), "discount": 1.0})
     lateral_env.reset(seed=0, options=options)
-    R_GoalW = lateral_env.rlfd.scene.X_WGoal.rotation().inverse().matrix()
+    R_GoalW = lateral_env._true_goal().rotation().inverse().matrix()
     error, _ = lateral_env._part_error()
     lateral_cm = float(np.sum(np.abs((R_GoalW @ error)[:2]))) / 0.01
     assert lateral_env._potential == pytest.approx(-2.0 * lateral_cm, rel=1e-12)

@@ -6,7 +6,9 @@ the package of ``against`` (a git revision, extracted with ``git archive`` into 
 temporary folder), each in a fresh interpreter, the two alternating within every repeat
 so that they share the machine's state. It reports each code's median wall time, their
 ratio, and whether the two ran the very same episodes (success, insertion time and peak
-forces of every start), so a speed-up that changed the physics shows as such.
+forces of every start), so a speed-up that changed the physics shows as such, and the
+largest resident set an evaluation worker reached (a diagram kept per episode shows as
+memory that grows with the episodes a worker runs).
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ _COMPARED = ("success", "insertion_time_s", "peak_force_n", "peak_low_passed_for
 # Run in a fresh interpreter with PYTHONPATH set to the code under test. Old code has
 # no shared pool: each evaluation then spawns its own, as it did.
 _SCRIPT = """
-import contextlib, json, sys, time
+import contextlib, json, resource, sys, time
 import rlfd_drake, rlfd_drake.models, rlfd_drake.evaluate as E
 cells, episodes, seed, keys = json.loads(sys.argv[1])
 shared = getattr(E, "shared_evaluation_workers", None)
@@ -57,6 +59,8 @@ with (shared(2) if shared else contextlib.nullcontext()):
         out["cells"].append({"wall_s": time.perf_counter() - t,
                              "episodes": {k: r["episode_table"][k] for k in keys}})
 out["wall_s"] = time.perf_counter() - started
+# The workers have been joined: the largest resident set any of them reached (kB).
+out["worker_max_rss_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
 print("RESULT " + json.dumps(out))
 """
 
@@ -138,7 +142,9 @@ def run(
 
     Returns:
         ``{"wall_s": {"this", "against"}, "speedup": against / this,
-        "samples_s", "per_episode_s", "same_episodes", "success_pct" (per code, per
+        "samples_s", "per_episode_s", "worker_max_rss_mb" (median over repeats of the
+        largest resident set an evaluation worker reached), "same_episodes",
+        "success_pct" (per code, per
         cell, of the last repeat), "against_commit", "cells",
         "episodes", "repeats", "seed"}``.
     """
@@ -147,6 +153,7 @@ def run(
     check_seed("seed", seed)
     cells = _cells(cells)
     samples: dict[str, list[float]] = {"this": [], "against": []}
+    rss: dict[str, list[float]] = {"this": [], "against": []}
     episodes_of: dict[str, list] = {}
     with tempfile.TemporaryDirectory(prefix="rlfd_bench_evaluate_") as folder:
         tree = Path(folder) / "against"
@@ -161,6 +168,7 @@ def run(
             for code in order:
                 result = _time_code(roots[code], cells, episodes, seed, work)
                 samples[code].append(result["wall_s"])
+                rss[code].append(result["worker_max_rss_mb"])
                 episodes_of[code] = [cell["episodes"] for cell in result["cells"]]
     wall = {code: statistics.median(s) for code, s in samples.items()}
     total = episodes * len(cells)
@@ -173,6 +181,8 @@ def run(
         "speedup": wall["against"] / wall["this"],
         "samples_s": samples,
         "per_episode_s": {code: w / total for code, w in wall.items()},
+        "worker_max_rss_mb": {code: statistics.median(r) for code, r in rss.items()},
+        "worker_max_rss_mb_samples": rss,
         "same_episodes": episodes_of["this"] == episodes_of["against"],
         "success_pct": success_pct,
         "against": against,

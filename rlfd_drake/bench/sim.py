@@ -34,7 +34,15 @@ from pydrake.systems.controllers import InverseDynamicsController
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from rlfd_drake.scene import AddRlfdScene, CalcPartPose, Scene, SceneConfig, SolvePandaIK
+from rlfd_drake.scene import (
+    AddRlfdScene,
+    CalcPartPose,
+    FixturePoseInWorld,
+    GoalPoseInWorld,
+    Scene,
+    SceneConfig,
+    SolvePandaIK,
+)
 from rlfd_drake.tasks import TaskSpec, list_tasks, load_task
 
 PD_KP = 100.0  # 1/s^2 (acceleration gain of the inverse-dynamics controller)
@@ -94,8 +102,10 @@ def BuildHeldScene(
 def _pose_in_fixture(scene: Scene, p_F: np.ndarray, yaw_deg: float = 0.0) -> RigidTransform:
     """X_WP for P at p_F (m) in F, with the goal orientation turned by ``yaw_deg`` about
     F's z."""
-    X_WF = scene.X_WFixture_true
-    R_WP = scene.X_WGoal.rotation() @ RotationMatrix.MakeZRotation(np.radians(yaw_deg))
+    default_context = scene.plant.CreateDefaultContext()
+    X_WF = FixturePoseInWorld(scene, default_context)
+    X_WGoal = GoalPoseInWorld(scene, default_context)
+    R_WP = X_WGoal.rotation() @ RotationMatrix.MakeZRotation(np.radians(yaw_deg))
     return RigidTransform(R_WP, X_WF @ np.asarray(p_F, dtype=float))
 
 
@@ -126,8 +136,9 @@ def press_setup(
 def p_FP(held: HeldScene, context: Context) -> np.ndarray:
     """Position of P in the true fixture frame F (3,), m."""
     scene = held.scene
-    X_WP = CalcPartPose(scene.plant, held.plant_context(context), scene)
-    return scene.X_WFixture_true.inverse() @ X_WP.translation()
+    plant_context = held.plant_context(context)
+    X_WP = CalcPartPose(scene.plant, plant_context, scene)
+    return FixturePoseInWorld(scene, plant_context).inverse() @ X_WP.translation()
 
 
 def _real_time_factor(held: HeldScene, context: Context, sim_time_s: float) -> float:

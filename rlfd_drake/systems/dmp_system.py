@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from pydrake.systems.framework import (
     BasicVector,
@@ -13,6 +15,9 @@ from pydrake.systems.framework import (
 
 from rlfd_drake import dmp
 from rlfd_drake.dmp import CartesianDmp
+
+#: The CartesianDmp fields ``SetForcingWeights`` replaces.
+_FORCING_WEIGHTS = ("weights_translation", "weights_orientation")
 
 __all__ = ["DmpSystem"]
 
@@ -141,6 +146,32 @@ class DmpSystem(LeafSystem):
     def phase_stop_gain_per_m2(self) -> float:
         """``alpha_px`` of phase stopping (1/m^2); 0 is off."""
         return self._phase_stop_gain
+
+    def SetForcingWeights(self, model: CartesianDmp) -> None:
+        """Takes the forcing-term weights of ``model``, which must be this system's DMP
+        in every other field (the episodic baselines, Table I type C, search the
+        weights: one diagram serves all their rollouts). Takes effect at the next
+        update; call before ``Simulator.Initialize``.
+
+        Raises:
+            ValueError: ``model`` differs in a field other than the two weights.
+        """
+        # CartesianDmp checks the weights' shapes against its config, compared here.
+        for f in dataclasses.fields(CartesianDmp):
+            if f.name in _FORCING_WEIGHTS:
+                continue
+            mine, theirs = getattr(self._model, f.name), getattr(model, f.name)
+            same = (
+                np.array_equal(mine, theirs)
+                if isinstance(mine, np.ndarray) or isinstance(theirs, np.ndarray)
+                else mine == theirs
+            )
+            if not same:
+                raise ValueError(
+                    f"only the forcing weights may change: {f.name} = {theirs!r}, "
+                    f"this DMP's is {mine!r}"
+                )
+        self._model = model
 
     def time_scale(self, context: Context) -> float:
         """The factor on ``tau`` of the last step in ``context`` (1 without slowing)."""

@@ -105,6 +105,9 @@ class Observer(LeafSystem):
     initialisation; the contact force at an instant is the sum over contact
     surfaces/points of |F| (magnitudes, so opposing wall forces do not cancel).
     ``distance_to_goal`` (1): |p_WP - p_WGoal_true|, m.
+
+    The true goal is X_WGoal_true = X_WB X_BGoal of the body ``goal_body_index`` (the
+    fixture; the world body for a fixed goal), read from ``body_poses``.
     """
 
     def __init__(
@@ -112,7 +115,8 @@ class Observer(LeafSystem):
         plant: MultibodyPlant,
         part_body_index: BodyIndex,
         X_BP: RigidTransform,
-        X_WGoal_true: RigidTransform,
+        goal_body_index: BodyIndex,
+        X_BGoal: RigidTransform,
         X_WGoal_nominal: RigidTransform,
         wrist_joint_index: JointIndex,
         arm_instance: ModelInstanceIndex,
@@ -123,7 +127,10 @@ class Observer(LeafSystem):
         self._body = int(part_body_index)
         self._X_BP = X_BP
         self._p_BP = X_BP.translation().copy()
-        self._p_goal_true = X_WGoal_true.translation().copy()
+        # The true goal rides on a body (the fixture), read from the plant's poses: the
+        # fixture's pose is a parameter of the context (scene.SetFixtureError).
+        self._goal_body = int(goal_body_index)
+        self._X_BGoal = X_BGoal
         self._p_goal_nominal = X_WGoal_nominal.translation().copy()
         self._R_goal_nominal_inv = X_WGoal_nominal.rotation().inverse()
         joint = plant.get_joint(wrist_joint_index)
@@ -171,7 +178,8 @@ class Observer(LeafSystem):
 
     def DistanceToGoal(self, context: Context) -> float:
         """|p_WP - p_WGoal_true| (m)."""
-        return float(np.linalg.norm(self._X_WP(context).translation() - self._p_goal_true))
+        p_goal_true = (self._poses.Eval(context)[self._goal_body] @ self._X_BGoal).translation()
+        return float(np.linalg.norm(self._X_WP(context).translation() - p_goal_true))
 
     @staticmethod
     def TotalContactForce(contact_results: ContactResults) -> float:

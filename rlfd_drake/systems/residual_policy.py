@@ -85,13 +85,18 @@ class ResidualPolicy(LeafSystem):
         # Periodic event times are sums of floats: 50 x 0.1 s may land a hair before 5 s.
         self._first_call_s = config.activation_time_s - 1e-9
         self.config = config
-        self._policy_object = policy
-        self._policy = _as_callable(policy)
+        self.SetPolicy(policy)
         self._observation_port = self.DeclareVectorInputPort("observation", config.observation_size)
         state_index = self.DeclareDiscreteState(6)
         self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, 0.0, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
         self.DeclareStateOutputPort("residual", state_index)
+
+    def SetPolicy(self, policy: Policy) -> None:
+        """Replaces the policy (a diagram is built once and serves many policies).
+        Takes effect at the next update; call before ``Simulator.Initialize``."""
+        self._policy = _as_callable(policy)
+        self._policy_object = policy
 
     def ResetPolicy(self) -> None:
         """Calls the policy's ``reset()`` (recurrent state, observation stack), if it
