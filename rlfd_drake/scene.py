@@ -11,7 +11,9 @@ Frames (monogram notation, X_AB = pose of B in A; see also ``tasks.py``):
   the weld's reaction force is what a wrist force/torque sensor would read
   (``CalcWristWrench``).
 * The fixture body ``fixture`` is welded to the world at
-  ``X_WF_true = X_WF_nominal * X_err`` (the fixture error, unseen by the demonstration).
+  ``X_WF_true = X_WF_nominal * X_err`` (the fixture error, unseen by the demonstration),
+  through the frame ``fixture_mount`` whose pose is a context parameter
+  (``SetFixtureError``): one built diagram serves every episode's error.
 
 Contact: the part is compliant hydroelastic (boxes), the fixture and table are rigid
 hydroelastic (boxes and convex meshes, i.e. chamfered wall pieces). Compliant-rigid is
@@ -465,7 +467,8 @@ def AddRlfdScene(
         builder: the diagram builder.
         task: the task (part, fixture, grasp, nominal fixture pose).
         config: plant and contact configuration (default SceneConfig()).
-        fixture_error: X_err, pose error of the fixture in F (None = no error).
+        fixture_error: X_err, pose error of the fixture in F (None = no error): the
+            default of the mount's pose parameter (``SetFixtureError`` changes it).
     """
     config = config if config is not None else SceneConfig()
     plant_config = MultibodyPlantConfig(
