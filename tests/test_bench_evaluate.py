@@ -33,6 +33,10 @@ def test_the_benchmark_times_both_codes_on_the_same_episodes():
         data["wall_s"]["this"]
     ]
     assert data["per_episode_s"]["this"] == pytest.approx(data["wall_s"]["this"] / 2)
+    # A worker holds Drake and torch: far above 100 MB, far below the machine's memory.
+    for code in ("this", "against"):
+        assert 100 < data["worker_max_rss_mb"][code] < 8000
+        assert data["worker_max_rss_mb_samples"][code] == [data["worker_max_rss_mb"][code]]
 
 
 @pytest.mark.parametrize(
