@@ -329,6 +329,14 @@ def _fingerprint_parts(value, out: list[bytes]) -> None:
         raise TypeError(f"cannot fingerprint a {type(value).__name__}")
 
 
+def _fingerprint(*values) -> str:
+    """A hash of ``values``' exact, type-tagged encodings (``_fingerprint_parts``)."""
+    parts: list[bytes] = []
+    for value in values:
+        _fingerprint_parts(value, parts)
+    return hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
+
+
 def _prefix_key(
     task: TaskSpec,
     dmp_model: CartesianDmp,
@@ -340,11 +348,8 @@ def _prefix_key(
     """What decides an episode up to the residual's activation: the task, the DMP, the
     start and fixture error, the diagram's configuration except what only acts on
     the residual (its mode), and the loop's chunks and stopping rule."""
-    parts: list[bytes] = []
     before_activation = replace(config, residual_mode="full")
-    for value in (task, dmp_model, spec, before_activation, chunk_s, stop_after_success_s):
-        _fingerprint_parts(value, parts)
-    return hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
+    return _fingerprint(task, dmp_model, spec, before_activation, chunk_s, stop_after_success_s)
 
 
 #: Diagrams ``run_episode`` built, reused by later episodes of the same task, DMP,
@@ -384,10 +389,7 @@ def _episode_diagram(
         weights_translation=np.zeros_like(dmp_model.weights_translation),
         weights_orientation=np.zeros_like(dmp_model.weights_orientation),
     )
-    parts: list[bytes] = []
-    for value in (task, unweighted, config, policy is None, coupling_policy is None):
-        _fingerprint_parts(value, parts)
-    key = hashlib.blake2b(b"".join(parts), digest_size=20).hexdigest()
+    key = _fingerprint(task, unweighted, config, policy is None, coupling_policy is None)
     rlfd = _DIAGRAM_CACHE.get(key)
     if rlfd is None:
         rlfd = BuildRlfdDiagram(
