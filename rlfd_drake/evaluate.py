@@ -29,6 +29,7 @@ Policies are named by a string, so that worker processes can build their own:
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import math
@@ -93,6 +94,7 @@ __all__ = [
 RESULT_KEYS = (
     "task",
     "policy",
+    "policy_sha256",
     "residual_mode",
     "seed",
     "grid",
@@ -624,6 +626,7 @@ def evaluate(
         residual_mode=diagram_residual_mode(policy_spec, residual_mode),
         composition=composition,
     )
+    fingerprint = policy_fingerprint(policy_spec)
     specs = make_episode_specs(task, episodes, seed, grid)
     episode_seeds = np.random.SeedSequence([seed, 1]).generate_state(episodes).tolist()
     setup = (task_name, policy_spec, residual_mode, config, deterministic, noise_scale)
@@ -666,6 +669,8 @@ def evaluate(
     return {
         "task": task.name,
         "policy": policy_spec,
+        # Read before the episodes: a file rewritten during them is not what they ran.
+        "policy_sha256": fingerprint,
         "residual_mode": residual_mode,
         "composition": composition,
         "residual_bounds": list(config.residual_bounds(task)),
@@ -973,6 +978,23 @@ def policy_stem(spec: str) -> str:
     if path.parent.name in RUN_SUBFOLDERS and path.parent.parent.name:
         return f"{path.parent.parent.name}_{path.stem}"
     return path.stem
+
+
+def policy_fingerprint(policy_spec: str) -> str | None:
+    """The SHA-256 of the saved file ``policy_spec`` names (``sha256sum`` of it); of
+    several (translation|orientation parts, an ensemble's members), the SHA-256 of
+    their digests, one a line, in order; None for named policies only. A stored
+    evaluation keeps it, so that one of a policy retrained at the same path is measured
+    again (``reproduce.stored_or_new_evaluation``) rather than reused."""
+    parts = policy_spec.replace(ENSEMBLE_SEPARATOR, "|").split("|")
+    digests = [
+        hashlib.sha256(existing_policy_file(part).read_bytes()).hexdigest()
+        for part in parts
+        if part not in NAMED_POLICIES
+    ]
+    if len(digests) <= 1:
+        return digests[0] if digests else None
+    return hashlib.sha256("\n".join(digests).encode()).hexdigest()
 
 
 def diagram_residual_mode(policy_spec: str, residual_mode: str) -> str:

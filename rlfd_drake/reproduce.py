@@ -1899,6 +1899,11 @@ def stored_or_new_evaluation(
         )
         if not same:
             stored = None
+        elif available and _of_another_policy(stored, policy):
+            # The file at the path was replaced (a run trained again): the stored
+            # evaluation is not of it, whatever its other figures.
+            print(f"  {name}: stored evaluation is of an earlier file at {policy}", flush=True)
+            stored = None
         elif all(key in stored for key in required) and not called_from_start(stored):
             return stored
     if not available:
@@ -1921,6 +1926,16 @@ def stored_or_new_evaluation(
     )
     write_evaluation(result, name)
     return result
+
+
+def _of_another_policy(stored: dict, policy: str) -> bool:
+    """Whether a stored evaluation records the fingerprint of other policy files than
+    those ``policy`` names now (evaluations stored before fingerprints were recorded,
+    2026-12-06, cannot tell, and count as of this one)."""
+    from rlfd_drake.evaluate import policy_fingerprint
+
+    recorded = stored.get("policy_sha256")
+    return recorded is not None and recorded != policy_fingerprint(policy)
 
 
 def _cell(

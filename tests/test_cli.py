@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -186,6 +187,8 @@ def test_the_shipped_rj45_policy_reads_the_torque_as_trained_and_runs_alone():
         "models/tasks/variants/rj45_slow_insert.yaml", str(shipped), 1, 0, workers=1, progress=False
     )
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
+    # The file it ran, fingerprinted (a policy retrained at the path is measured again).
+    assert result["policy_sha256"] == hashlib.sha256(shipped.read_bytes()).hexdigest()
 
 
 def test_the_shipped_full_pose_peg_policy_was_trained_on_the_wide_error_and_runs_on_peg():

@@ -39,6 +39,7 @@ def test_evaluate_returns_the_documented_keys(dmp_result):
     r = dmp_result
     assert set(RESULT_KEYS) <= set(r)
     assert r["episodes"] == 4 and r["task"] == "peg_easy" and r["policy"] == "dmp"
+    assert r["policy_sha256"] is None  # no file
     assert 0.0 <= r["success_rate"] <= 1.0
     assert r["success_std_kind"].startswith("binomial")  # the uniform box has one bin
     p = r["success_rate"]

@@ -589,6 +589,61 @@ def test_an_evaluation_that_called_its_policy_from_the_start_is_measured_again(
     assert reproduce.CALLED_FROM_START_NOTE in markdown
 
 
+def test_an_evaluation_of_an_earlier_file_at_the_policy_path_is_measured_again(
+    tmp_path, monkeypatch
+):
+    """A run trained again at the same path has a new policy.zip: its stored evaluation
+    records the old file's fingerprint and is measured again; one of the same file is
+    reused; one stored before fingerprints (none recorded) is reused as before; where
+    the file is not here, the stored one stays."""
+    from rlfd_drake.evaluate import policy_fingerprint
+    from rlfd_drake.results import write_result
+
+    fresh = _record_fresh_evaluations(tmp_path, monkeypatch)
+    policy = tmp_path / "runs" / "a" / "policy.zip"
+    policy.parent.mkdir(parents=True)
+    policy.write_bytes(b"first training")
+    stored = {
+        "episodes": 40,
+        "seed": 0,
+        "success_rate": 0.4,
+        "policy": str(policy),
+        "residual_bounds": reproduce._bounds("peg"),
+        "residual_policy_from_activation": True,
+    }
+    name, args = "eval_peg_a_n40_s0", ("full", 40, 0, 1)
+    write_result(name, {**stored, "policy_sha256": policy_fingerprint(str(policy))}, seed=0)
+    same = reproduce.stored_or_new_evaluation("peg", str(policy), name, *args)
+    assert same["success_rate"] == 0.4 and fresh == []
+    policy.write_bytes(b"second training")
+    kept = reproduce.stored_or_new_evaluation("peg", str(policy), name, *args, available=False)
+    assert kept["success_rate"] == 0.4 and fresh == []
+    reproduce.stored_or_new_evaluation("peg", str(policy), name, *args)
+    assert fresh == [str(policy)]
+    write_result(name, stored, seed=0)  # stored before fingerprints: cannot tell
+    reproduce.stored_or_new_evaluation("peg", str(policy), name, *args)
+    assert fresh == [str(policy)]
+
+
+def test_a_policy_fingerprint_covers_every_file_of_the_spec(tmp_path):
+    from rlfd_drake.evaluate import policy_fingerprint
+
+    a, b = tmp_path / "a.zip", tmp_path / "b.zip"
+    a.write_bytes(b"a")
+    b.write_bytes(b"b")
+    assert policy_fingerprint("dmp") is None
+    assert policy_fingerprint("force_search|slope") is None
+    one = policy_fingerprint(str(a))
+    split = policy_fingerprint(f"{a}|slope")
+    assert split == one and len(one) == 64
+    pair = policy_fingerprint(f"{a}+{b}")
+    assert pair != one and pair != policy_fingerprint(f"{b}+{a}")
+    b.write_bytes(b"B")
+    assert policy_fingerprint(f"{a}+{b}") != pair
+    with pytest.raises(ValueError, match="does not exist"):
+        policy_fingerprint(str(tmp_path / "missing.zip"))
+
+
 def test_a_fresh_clone_keeps_the_stored_evaluations_of_runs_it_does_not_have(tmp_path, monkeypatch):
     """Run folders are local: without one, its stored evaluation and its training log
     in results/ still fill the row, and nothing is evaluated anew for it."""
