@@ -22,10 +22,16 @@ def results_dir() -> Path:
     return path
 
 
+#: How ``sys.argv[0]`` reads when the ``rlfd`` command started this process: its
+#: console script, or ``python -m rlfd_drake.cli`` (as ``run_queue`` starts each training
+#: run), whose argv[0] is the module's file path.
+_RLFD_ENTRY_POINTS = ("rlfd", "/rlfd", "rlfd_drake/cli.py")
+
+
 def invoked_command() -> str:
     """The command line that started this process, as a user would retype it."""
     argv = list(sys.argv)
-    if argv and argv[0].endswith(("/rlfd", "rlfd")):
+    if argv and argv[0].endswith(_RLFD_ENTRY_POINTS):
         argv[0] = "rlfd"
     return shlex.join(argv)
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from rlfd_drake.results import check_result_name, format_json, write_result
+from rlfd_drake.results import check_result_name, format_json, invoked_command, write_result
 
 
 def test_format_json_reads_back_the_same_value_with_scalar_lists_on_one_line():
@@ -48,6 +48,20 @@ def test_write_result_stores_command_seed_date_and_data(tmp_path, monkeypatch):
         {"success": [1, 0]},
     )
     assert record["date"].startswith("20")
+
+
+@pytest.mark.parametrize(
+    "argv0",
+    [".venv/bin/rlfd", "rlfd", "/tmp/clone/rlfd_drake/cli.py"],  # the last: python -m
+)
+def test_the_stored_command_reads_as_the_rlfd_command_however_it_was_started(argv0, monkeypatch):
+    monkeypatch.setattr("sys.argv", [argv0, "train", "--task", "peg", "--out", "runs/a b"])
+    assert invoked_command() == "rlfd train --task peg --out 'runs/a b'"
+
+
+def test_a_stored_command_of_another_program_keeps_its_name(monkeypatch):
+    monkeypatch.setattr("sys.argv", ["scripts/study.py", "--seed", "1"])
+    assert invoked_command() == "scripts/study.py --seed 1"
 
 
 @pytest.mark.parametrize("name", ["", "../eval_x", "sub/eval_x", ".hidden"])
