@@ -35,7 +35,7 @@ import json
 import math
 import time
 import zlib
-from collections import Counter
+from collections import Counter, OrderedDict
 from contextlib import contextmanager
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -119,7 +119,11 @@ RESULT_KEYS = (
 #: it was trained on top of or None), read once per process and file version:
 #: ``make_policy`` runs for every episode, and a worker outlives an evaluation
 #: (``shared_evaluation_workers``) while a run may be retrained at the same path.
-_MODEL_CACHE: dict[tuple[str, int, int], tuple[object, str | None]] = {}
+#: The least recently used go beyond ``_MODEL_CACHE_SIZE`` models (about 2 MB each): a
+#: worker of ``rlfd reproduce`` meets some sixty policy files, one evaluation at most
+#: an ensemble's few.
+_MODEL_CACHE: OrderedDict[tuple[str, int, int], tuple[object, str | None]] = OrderedDict()
+_MODEL_CACHE_SIZE = 8
 #: Policies named by a word rather than a file.
 NAMED_POLICIES = ("dmp", "random", "force_search", "force_search_toward", "slope", "fixture_oracle")
 
@@ -249,6 +253,9 @@ def make_policy(
             load_sb3_model(policy_spec)[0],
             trained_base_correction(path),
         )
+        while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
+            _MODEL_CACHE.popitem(last=False)
+    _MODEL_CACHE.move_to_end(key)
     model, base_correction = _MODEL_CACHE[key]
     policy = DeployedPolicy(
         model,

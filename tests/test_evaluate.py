@@ -290,6 +290,31 @@ def test_saved_sb3_models_become_residual_policies(module, name, kind, tmp_path)
     np.testing.assert_allclose(policy(obs), first)  # deterministic after a reset
 
 
+def test_a_process_keeps_only_its_most_recently_used_models(tmp_path, monkeypatch):
+    """A worker of rlfd reproduce meets some sixty policy files: it keeps the
+    ``_MODEL_CACHE_SIZE`` it used last, not every model it ever loaded."""
+    import stable_baselines3
+
+    import rlfd_drake.evaluate as evaluate_module
+
+    monkeypatch.setattr(evaluate_module, "_MODEL_CACHE_SIZE", 2)
+    monkeypatch.setattr(evaluate_module, "_MODEL_CACHE", evaluate_module.OrderedDict())
+    model = stable_baselines3.PPO("MlpPolicy", _ResidualEnv(), device="cpu", seed=0)
+    paths = [str(tmp_path / f"{name}.zip") for name in "abc"]
+    for path in paths:
+        model.save(path)
+
+    def held() -> list[str]:
+        return [key[0] for key in evaluate_module._MODEL_CACHE]
+
+    first = make_policy(paths[0]).model
+    make_policy(paths[1])
+    assert make_policy(paths[0]).model is first  # used again: not read again
+    make_policy(paths[2])
+    assert held() == [paths[0], paths[2]]  # b, the least recently used, went
+    assert make_policy(paths[1]).model is not None and held() == [paths[2], paths[1]]
+
+
 @pytest.mark.parametrize("name", ["SAC", "PPO"])
 def test_noise_scale_scales_the_sampling_spread(name):
     """--noise-scale s samples with s times the policy's standard deviation: a small s
