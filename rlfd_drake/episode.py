@@ -374,6 +374,14 @@ def clear_diagram_cache() -> None:
     _DIAGRAM_STATS.update(built=0, reused=0)
 
 
+def _release_policies(rlfd: RlfdDiagram) -> None:
+    """Drops the policies a kept diagram ran last (it is given new ones before its next
+    episode), so that at most one kept diagram holds a model between episodes."""
+    for system in (rlfd.residual_policy, rlfd.coupling_policy):
+        if system is not None:
+            system.ReleasePolicy()
+
+
 def _episode_diagram(
     task: TaskSpec,
     dmp_model: CartesianDmp,
@@ -391,6 +399,10 @@ def _episode_diagram(
     )
     key = _fingerprint(task, unweighted, config, policy is None, coupling_policy is None)
     rlfd = _DIAGRAM_CACHE.get(key)
+    # Only the diagram of this episode needs a policy: the others let theirs go.
+    for other in _DIAGRAM_CACHE.values():
+        if other is not rlfd:
+            _release_policies(other)
     if rlfd is None:
         rlfd = BuildRlfdDiagram(
             task, dmp_model, config, policy=policy, coupling_policy=coupling_policy

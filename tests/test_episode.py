@@ -336,6 +336,10 @@ def test_a_kept_diagram_runs_the_same_episodes_as_a_new_one(peg_easy, dmp):
     ]
     kept = [run_episode(peg_easy, m, s, policy=p, reuse_prefix=False) for s, m, p in runs]
     assert episode_module.diagram_cache_stats() == {"built": 2, "reused": 3, "held": 2}
+    # Between episodes only the diagram run last may hold a policy: the policy diagram,
+    # followed by DMP-only episodes, has let policy_b go.
+    policy_diagram = next(d for d in episode_module._DIAGRAM_CACHE.values() if d.residual_policy)
+    assert policy_diagram.residual_policy._policy_object is None
     for (spec, model, policy), result in list(zip(runs, kept, strict=True))[2:]:
         episode_module.clear_diagram_cache()
         fresh_policy = None if policy is None else _CallCountingPolicy()

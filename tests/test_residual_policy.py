@@ -97,3 +97,27 @@ def test_bad_action_raises():
         _simulate(lambda obs: np.full(6, np.nan), 0.1)
     with pytest.raises(TypeError, match="callable"):
         ResidualPolicy(42)
+
+
+def test_a_released_policy_is_let_go_and_not_called():
+    """A diagram kept for reuse drops its policy between episodes (ReleasePolicy): the
+    policy is no longer referenced, an update says so, and SetPolicy brings one back."""
+    import gc
+    import weakref
+
+    policy = CountingPolicy()
+    simulator, _, _ = _simulate(policy, 0.15)
+    system = next(s for s in simulator.get_system().GetSystems() if isinstance(s, ResidualPolicy))
+    system.ReleasePolicy()
+    released = weakref.ref(policy)
+    del policy
+    gc.collect()
+    assert released() is None
+    simulator.get_mutable_context().SetTime(0.0)
+    with pytest.raises(RuntimeError, match="policy was released; call SetPolicy first"):
+        simulator.Initialize()
+    again = CountingPolicy()
+    system.SetPolicy(again)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.15)
+    assert again.resets == 1 and again.calls == 3

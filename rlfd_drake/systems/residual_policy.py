@@ -98,6 +98,12 @@ class ResidualPolicy(LeafSystem):
         self._policy = _as_callable(policy)
         self._policy_object = policy
 
+    def ReleasePolicy(self) -> None:
+        """Drops the policy, so that a diagram kept for reuse does not keep a model
+        alive between its episodes; updates raise until ``SetPolicy`` gives another."""
+        self._policy = None
+        self._policy_object = None
+
     def ResetPolicy(self) -> None:
         """Calls the policy's ``reset()`` (recurrent state, observation stack), if it
         has one: done at every initialisation, and by ``ResumeFromSnapshot``, which
@@ -114,6 +120,8 @@ class ResidualPolicy(LeafSystem):
     def _update(self, context: Context, discrete_state: DiscreteValues) -> None:
         if context.get_time() < self._first_call_s:
             return  # the held zero stays
+        if self._policy is None:
+            raise RuntimeError("ResidualPolicy: its policy was released; call SetPolicy first")
         obs = np.asarray(self._observation_port.Eval(context), dtype=np.float32)
         action = np.asarray(self._policy(obs), dtype=float).reshape(-1)
         if action.shape != (6,) or not np.all(np.isfinite(action)):
