@@ -8,6 +8,7 @@ seed and date (see ``results.write_result``).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -105,9 +106,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         if args.starts is not None:
             cells["episodes"] = args.starts
         data = evaluate_speed.run(against=args.against, repeats=args.repeats, **cells)
-        name = f"bench_evaluate_vs_{data['against_commit'][:7]}"
-        if args.cell:  # chosen cells are their own record
-            name += "_" + "__".join(f"{Path(t).stem}_{Path(p).stem}" for t, p, _ in cells["cells"])
+        name = bench_evaluate_name(data["against_commit"], cells.get("cells"))
     else:  # argparse restricts the choices
         raise ValueError(f"unknown benchmark {args.what!r}")
     path = write_result(name, data)
@@ -116,6 +115,25 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     else:
         print(f"wrote {path}")
     return 0
+
+
+#: Longest results file stem ``rlfd bench evaluate`` writes (file names stop at 255 bytes).
+_BENCH_NAME_MAX = 160
+
+
+def bench_evaluate_name(against_commit: str, cells: list[tuple[str, str, str]] | None) -> str:
+    """``bench_evaluate_vs_<commit>``, and for chosen cells their tasks and policies
+    (a run's ``policy.zip`` by its run folder, as evaluations are named); a name that
+    would be too long for a file keeps its start and ends in a hash of the whole."""
+    from rlfd_drake.evaluate import policy_stem
+
+    name = f"bench_evaluate_vs_{against_commit[:7]}"
+    if cells:  # chosen cells are their own record
+        name += "_" + "__".join(f"{Path(t).stem}_{policy_stem(p)}" for t, p, _ in cells)
+    if len(name) > _BENCH_NAME_MAX:
+        digest = hashlib.sha256(name.encode()).hexdigest()[:12]
+        name = f"{name[: _BENCH_NAME_MAX - 13]}_{digest}"
+    return name
 
 
 def _cmd_demo_record(args: argparse.Namespace) -> int:

@@ -309,6 +309,24 @@ def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert "--cell takes TASK POLICY [MODE], got 'peg'" in capsys.readouterr().err
 
 
+def test_bench_evaluate_names_runs_by_their_folder_and_stays_a_file_name():
+    from rlfd_drake.cli import _BENCH_NAME_MAX, bench_evaluate_name
+
+    commit = "0123456789abcdef"
+    assert bench_evaluate_name(commit, None) == "bench_evaluate_vs_0123456"
+    cells = [("peg", "runs/peg_ppo_s0/policy.zip", "full"), ("gear", "dmp", "full")]
+    assert (
+        bench_evaluate_name(commit, cells) == "bench_evaluate_vs_0123456_peg_peg_ppo_s0__gear_dmp"
+    )
+    many = [
+        ("peg", f"runs/peg_ppo_std2_so_tt_e700_s{seed}/policy.zip", "full") for seed in range(9)
+    ]
+    long_name = bench_evaluate_name(commit, many)
+    assert len(long_name) == _BENCH_NAME_MAX
+    assert long_name.startswith("bench_evaluate_vs_0123456_peg_peg_ppo_std2_so_tt_e700_s0__")
+    assert long_name != bench_evaluate_name(commit, many[:8])  # the hash tells sets apart
+
+
 def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     """`rlfd train`'s exploration flags land in the TrainConfig it trains, and a bad
     one is a named error (exit 2), not a crash."""
