@@ -24,8 +24,8 @@ def results_dir() -> Path:
 
 #: How ``sys.argv[0]`` reads when the ``rlfd`` command started this process: its
 #: console script, or ``python -m rlfd_drake.cli`` (as ``run_queue`` starts each training
-#: run), whose argv[0] is the module's file path.
-_RLFD_ENTRY_POINTS = ("rlfd", "/rlfd", "rlfd_drake/cli.py")
+#: run), whose argv[0] is the module's file path. (".../bin/rlfd" ends in "rlfd".)
+_RLFD_ENTRY_POINTS = ("rlfd", "rlfd_drake/cli.py")
 
 
 def invoked_command() -> str:
