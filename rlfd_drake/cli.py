@@ -8,7 +8,6 @@ seed and date (see ``results.write_result``).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import time
@@ -126,14 +125,12 @@ def bench_evaluate_name(against_commit: str, cells: list[tuple[str, str, str]] |
     (a run's ``policy.zip`` by its run folder, as evaluations are named); a name that
     would be too long for a file keeps its start and ends in a hash of the whole."""
     from rlfd_drake.evaluate import policy_stem
+    from rlfd_drake.results import capped_stem
 
     name = f"bench_evaluate_vs_{against_commit[:7]}"
     if cells:  # chosen cells are their own record
         name += "_" + "__".join(f"{Path(t).stem}_{policy_stem(p)}" for t, p, _ in cells)
-    if len(name) > _BENCH_NAME_MAX:
-        digest = hashlib.sha256(name.encode()).hexdigest()[:12]
-        name = f"{name[: _BENCH_NAME_MAX - 13]}_{digest}"
-    return name
+    return capped_stem(name, _BENCH_NAME_MAX)
 
 
 def _cmd_demo_record(args: argparse.Namespace) -> int:

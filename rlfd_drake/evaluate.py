@@ -64,6 +64,7 @@ from rlfd_drake.policies import (
     trained_residual_mode,
 )
 from rlfd_drake.results import (
+    capped_stem,
     compact_png,
     episodes_path,
     read_episodes,
@@ -1025,6 +1026,12 @@ def trained_mode(policy_spec: str) -> str:
     return trained_residual_mode(policy_file(policy_spec)) or "full"
 
 
+#: Longest policy part of an evaluation's default name: an ensemble of several run
+#: folders would otherwise pass the 255 bytes a file name may have (every stored
+#: evaluation's policy part is shorter, so none is renamed).
+POLICY_STEM_MAX = 120
+
+
 def evaluation_name(
     task: str,
     policy_spec: str,
@@ -1043,7 +1050,8 @@ def evaluation_name(
     if stochastic:
         mode += sampling_suffix(noise_scale)
     count = "" if episodes is None else f"_n{episodes}"
-    return f"eval_{Path(task).stem}_{policy_stem(policy_spec)}{mode}{count}_s{seed}"
+    stem = capped_stem(policy_stem(policy_spec), POLICY_STEM_MAX)
+    return f"eval_{Path(task).stem}_{stem}{mode}{count}_s{seed}"
 
 
 def sampling_suffix(noise_scale: float = 1.0) -> str:

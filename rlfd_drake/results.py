@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as _dt
 import functools
 import gzip
+import hashlib
 import json
 import platform
 import shlex
@@ -79,6 +80,18 @@ def check_result_name(name: str) -> None:
     first): checked before a measurement runs, not after."""
     if not name or "/" in name or name.startswith("."):
         raise ValueError(f"result name must be a plain file stem, got {name!r}")
+
+
+def capped_stem(name: str, limit: int) -> str:
+    """``name`` if it has at most ``limit`` characters, else its start and a hash of the
+    whole (12 hex digits), ``limit`` characters in all: file names stop at 255 bytes, and
+    two long names that share their start still name two files."""
+    if limit < 24:
+        raise ValueError(f"limit must leave room for a start and a hash (>= 24), got {limit}")
+    if len(name) <= limit:
+        return name
+    digest = hashlib.sha256(name.encode()).hexdigest()[:12]
+    return f"{name[: limit - 13]}_{digest}"
 
 
 def new_result_path(name: str, overwrite: bool = False) -> Path:

@@ -90,6 +90,28 @@ def test_evaluation_file_names_of_policy_specs():
     )
 
 
+def test_an_ensemble_of_many_runs_gets_an_evaluation_name_a_file_can_have():
+    """The policy part of a default evaluation name is capped (start and hash), and
+    what follows it (mode, count, seed) is kept, so reproduce still finds it."""
+    from rlfd_drake.evaluate import POLICY_STEM_MAX, evaluation_name
+
+    members = [
+        f"runs/peg_incremental_ppo_std2_so_tt_lrlin_e700_s{seed}/policy.zip" for seed in range(5)
+    ]
+    name = evaluation_name("peg_incremental", "+".join(members), "full", True, 0, episodes=200)
+    stem = name.removeprefix("eval_peg_incremental_").removesuffix("_stochastic_n200_s0")
+    assert len(stem) == POLICY_STEM_MAX
+    assert stem.startswith("peg_incremental_ppo_std2_so_tt_lrlin_e700_s0_plus_")
+    assert len(name + ".episodes.json.gz") < 255
+    fewer = evaluation_name("peg_incremental", "+".join(members[:4]), "full", True, 0, episodes=200)
+    assert fewer != name  # the hash tells the ensembles apart
+    two = "+".join(members[:2])
+    assert evaluation_name("peg", two, "full", False, 0) == (
+        "eval_peg_peg_incremental_ppo_std2_so_tt_lrlin_e700_s0_plus_"
+        "peg_incremental_ppo_std2_so_tt_lrlin_e700_s1_s0"
+    )  # short enough: unchanged
+
+
 def test_evaluate_checks_its_result_name_before_running(tmp_path, monkeypatch, capsys):
     import rlfd_drake.evaluate
 

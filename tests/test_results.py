@@ -68,3 +68,15 @@ def test_a_stored_command_of_another_program_keeps_its_name(monkeypatch):
 def test_result_names_that_are_not_plain_file_stems_are_refused(name):
     with pytest.raises(ValueError, match="plain file stem"):
         check_result_name(name)
+
+
+def test_capped_stem_keeps_short_names_and_hashes_long_ones():
+    from rlfd_drake.results import capped_stem
+
+    assert capped_stem("eval_peg_dmp_s0", 40) == "eval_peg_dmp_s0"
+    long_a, long_b = "x" * 50 + "a", "x" * 50 + "b"
+    assert len(capped_stem(long_a, 40)) == 40
+    assert capped_stem(long_a, 40).startswith("x" * 27 + "_")
+    assert capped_stem(long_a, 40) != capped_stem(long_b, 40)
+    with pytest.raises(ValueError, match="limit must leave room"):
+        capped_stem(long_a, 10)
