@@ -601,6 +601,7 @@ def _cmd_seeds(args: argparse.Namespace) -> int:
         targets=_parse_targets(args.target),
         name=args.name,
         actions=tuple(args.actions),
+        overwrite=args.overwrite,
     )
     for column, spread in data["over_seeds"].items():
         print(f"{column}: {format_spread(spread)} % over {len(data['per_seed'])} seeds")
@@ -1164,6 +1165,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["mean", "sampled"],
         default=["mean", "sampled"],
         help="evaluate the policies' mean action and/or sampled actions",
+    )
+    seeds.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a stored study of the same name even if this one leaves some of it out "
+        "(one that keeps all of it, e.g. with a seed added, replaces it without this)",
     )
     seeds.set_defaults(func=_cmd_seeds)
 

@@ -9,7 +9,9 @@ episodes and wall-clock time, and, given targets, on how many seeds they are met
 Evaluations are stored under the names ``rlfd evaluate --episodes N`` gives them (or
 found under the names without ``_n<N>`` that earlier studies stored) and reused when one
 of the same size and seed exists, so re-running a study after adding a seed evaluates
-only the new seed. Run folders are local (``runs/`` is not committed): a folder that
+only the new seed and replaces the stored study; a study that would leave out part of a
+stored one of the same name (a seed, a task, the other starts) is refused unless
+``--overwrite``. Run folders are local (``runs/`` is not committed): a folder that
 is missing here is read from its copied log ``results/train_<folder name>/`` and its
 stored evaluations.
 """
@@ -137,9 +139,14 @@ def seed_study(
     targets: dict[str, float] | None = None,
     name: str | None = None,
     actions: tuple[str, ...] = tuple(ACTIONS),
+    overwrite: bool = False,
 ) -> dict:
     """Evaluates (or reuses the stored evaluations of) every run on every task and
     writes ``results/seeds_<name>.{json,md}``; returns the JSON's data.
+
+    A stored study of the same name is replaced only by one that keeps all of it (its
+    seeds, tasks and actions, on the same evaluation starts), e.g. after adding a seed;
+    one that would drop some of it raises ``FileExistsError`` unless ``overwrite``.
 
     Args:
         folders: one ``rlfd train`` run folder per seed.
@@ -149,6 +156,7 @@ def seed_study(
             paper's); the study counts the seeds that reach all of them.
         name: results file stem after ``seeds_`` (default: the folders' common name).
         actions: which of ``ACTIONS`` to evaluate ("mean" is needed for targets).
+        overwrite: replace a stored study even if this one leaves some of it out.
     """
     if not folders:
         raise ValueError("folders: give at least one run folder")
@@ -173,6 +181,10 @@ def seed_study(
     name = name or study_name(folders)
     runs = sorted((load_seed_run(folder) for folder in folders), key=lambda run: run.seed)
     _check_one_recipe(runs)
+    columns = [f"{task}/{label}" for task in tasks for label in actions]
+    if not overwrite:
+        cells = {(run.seed, column) for run in runs for column in columns}
+        _refuse_to_drop_a_stored_study(name, cells, episodes, seed)
     mode = runs[0].config.get("residual_mode", "full")
     composition = runs[0].config.get("composition", "residual")
 
@@ -222,7 +234,6 @@ def seed_study(
         )
         per_seed.append(row)
 
-    columns = [f"{task}/{label}" for task in tasks for label in actions]
     walls = [row["training_wall_time_s"] for row in per_seed if row["training_wall_time_s"]]
     data = {
         "name": name,
@@ -244,6 +255,36 @@ def seed_study(
     write_result(f"seeds_{name}", data, seed=seed)
     (results_dir() / f"seeds_{name}.md").write_text(seed_study_markdown(data))
     return data
+
+
+def _refuse_to_drop_a_stored_study(
+    name: str, cells: set[tuple[int, str]], episodes: int, seed: int
+) -> None:
+    """Raises FileExistsError if ``results/seeds_<name>.json`` holds a (seed, column)
+    cell the new study lacks, or was measured on other starts (episodes or seed)."""
+    path = results_dir() / f"seeds_{name}.json"
+    if not path.exists():
+        return
+    stored = json.loads(path.read_text())["data"]
+    if (stored.get("evaluation_episodes"), stored.get("evaluation_seed")) != (episodes, seed):
+        raise FileExistsError(
+            f"{path} was measured on {stored.get('evaluation_episodes')} starts of evaluation "
+            f"seed {stored.get('evaluation_seed')}, this study on {episodes} of seed {seed}; "
+            "pass --overwrite or another --name"
+        )
+    dropped = sorted(
+        (row["seed"], column)
+        for row in stored.get("per_seed", [])
+        for column in row.get("success", {})
+        if (row["seed"], column) not in cells
+    )
+    if dropped:
+        shown = ", ".join(f"seed {s} {column}" for s, column in dropped[:6])
+        more = f" and {len(dropped) - 6} more" if len(dropped) > 6 else ""
+        raise FileExistsError(
+            f"{path} holds results this study leaves out ({shown}{more}); "
+            "pass --overwrite or another --name"
+        )
 
 
 def _unknown_wall(resumed_at_episode: int | None) -> str:

@@ -192,3 +192,28 @@ def test_study_reuses_what_rlfd_evaluate_stored_and_targets_a_variant_by_name(
     assert data["per_seed"][0]["evaluations"][f"{variant}/mean"].endswith("_n160_s0")
     markdown = (tmp_path / "results" / f"seeds_{data['name']}.md").read_text()
     assert "| rj45_slow_insert, mean |" in markdown and "rj45_slow_insert >= 51 %" in markdown
+
+
+def test_a_stored_study_is_replaced_only_by_one_that_keeps_all_of_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    folders = [_run_folder(tmp_path, seed) for seed in (0, 1, 2)]
+    for folder, rate in zip(folders, (0.9, 0.8, 0.7), strict=True):
+        _store_evaluation(folder, "peg_easy", False, rate)
+    seed_study(folders[:2], ["peg_easy"], actions=("mean",))
+    # A seed added: the stored study's seeds are all kept, so it is replaced.
+    grown = seed_study(folders, ["peg_easy"], actions=("mean",))
+    assert [row["seed"] for row in grown["per_seed"]] == [0, 1, 2]
+    # A seed dropped: refused, naming what would be lost, and the file is untouched.
+    stored = (tmp_path / "results" / "seeds_recipe.json").read_text()
+    with pytest.raises(FileExistsError, match="seed 2 peg_easy/mean"):
+        seed_study(folders[:2], ["peg_easy"], actions=("mean",))
+    assert (tmp_path / "results" / "seeds_recipe.json").read_text() == stored
+    # Other evaluation starts are another measurement, not a superset.
+    with pytest.raises(FileExistsError, match="evaluation seed 0"):
+        seed_study(folders, ["peg_easy"], actions=("mean",), seed=1)
+    # --overwrite, or another name, is the way out.
+    shrunk = seed_study(folders[:2], ["peg_easy"], actions=("mean",), overwrite=True)
+    assert [row["seed"] for row in shrunk["per_seed"]] == [0, 1]
+    seed_study(folders[1:], ["peg_easy"], actions=("mean",), name="recipe_late")
+    assert (tmp_path / "results" / "seeds_recipe_late.json").exists()
