@@ -237,6 +237,31 @@ def test_the_shipped_full_pose_peg_policy_was_trained_on_the_wide_error_and_runs
     assert result["episodes"] == 1 and result["peak_force_n"] > 0
 
 
+def test_the_shipped_from_zero_peg_policy_is_the_seed_validation_chose_and_runs_on_peg():
+    """models/policies/peg_incremental_ppo_best_of_seven.zip (results/full_pose_study.md,
+    sections 38-39): the paper's recipe from a zero residual, no teacher, training seed 1
+    of seven; the stored fresh-start evaluation ran these very bytes."""
+    from rlfd_drake.evaluate import evaluate
+    from rlfd_drake.paths import SHIPPED_PEG_FROM_ZERO_POLICY, models_dir
+    from rlfd_drake.policies import load_sb3_model, training_config_file
+
+    shipped = models_dir() / SHIPPED_PEG_FROM_ZERO_POLICY
+    model, kind = load_sb3_model(shipped)
+    assert kind == "ppo"
+    config = json.loads(training_config_file(shipped).read_text())["config"]
+    assert config["task"] == "models/tasks/variants/peg_incremental.yaml"
+    assert (config["seed"], config["episodes"], config["learning_rate"]) == (1, 700, 6e-4)
+    assert config["init_from"] is None and config.get("imitate") is None
+    stored = Path(__file__).resolve().parents[1] / "results"
+    fresh = stored / "eval_peg_incremental_peg_incremental_ppo_best_of_seven_n200_s2.json"
+    record = json.loads(fresh.read_text())["data"]
+    assert record["policy_sha256"] == hashlib.sha256(shipped.read_bytes()).hexdigest()
+    result = evaluate(
+        "models/tasks/variants/peg_incremental.yaml", str(shipped), 1, 0, workers=1, progress=False
+    )
+    assert result["episodes"] == 1 and result["peak_force_n"] > 0
+
+
 def test_the_shipped_peg_copy_policy_records_its_teacher_and_cost_and_runs_on_peg():
     """models/policies/peg_ppo_imitate_peak_cost.zip (results/full_pose_study.md, section
     26): PPO from a copy of the search with the slope's turn, charged for the one-step
