@@ -25,7 +25,13 @@ from pathlib import Path
 
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
-from rlfd_drake.results import format_spread, results_dir, spread_over_seeds, write_result
+from rlfd_drake.results import (
+    format_spread,
+    new_result_path,
+    results_dir,
+    spread_over_seeds,
+    write_result,
+)
 from rlfd_drake.run_log import run_log_folders
 from rlfd_drake.train import TrainConfig
 
@@ -262,7 +268,8 @@ def _refuse_to_drop_a_stored_study(
 ) -> None:
     """Raises FileExistsError if ``results/seeds_<name>.json`` holds a (seed, column)
     cell the new study lacks, or was measured on other starts (episodes or seed)."""
-    path = results_dir() / f"seeds_{name}.json"
+    # The shared path helper also checks the name before any evaluation runs.
+    path = new_result_path(f"seeds_{name}", overwrite=True)
     if not path.exists():
         return
     stored = json.loads(path.read_text())["data"]
