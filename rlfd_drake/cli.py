@@ -567,6 +567,10 @@ def _cmd_keep(args: argparse.Namespace) -> int:
 
 
 def _cmd_select(args: argparse.Namespace) -> int:
+    if args.runs is not None:
+        return _select_seed(args)
+    if args.name is not None:
+        raise ValueError(f"--name names a selection among seeds (--runs), got --run {args.run}")
     from rlfd_drake.checkpoint_selection import select_checkpoint
 
     data = select_checkpoint(
@@ -586,6 +590,35 @@ def _cmd_select(args: argparse.Namespace) -> int:
             f"({Path(row['policy']).name}){mark}"
         )
     print(f"wrote {data['selected_folder']}/policy.zip and results/select_*.json, .md")
+    return 0
+
+
+def _select_seed(args: argparse.Namespace) -> int:
+    from rlfd_drake.seed_study import select_seed
+
+    if args.from_episode:
+        raise ValueError(
+            f"--from-episode chooses among a run's checkpoints (--run); with --runs each "
+            f"seed's final policy is a candidate, got --from-episode {args.from_episode}"
+        )
+    data = select_seed(
+        args.runs,
+        args.task,
+        episodes=args.episodes,
+        seed=args.seed,
+        test_seed=args.test_seed,
+        workers=args.workers,
+        name=args.name,
+        overwrite=args.overwrite,
+    )
+    for index, row in enumerate(data["candidates"]):
+        mark = "  <- chosen" if index == data["chosen"] else ""
+        print(
+            f"seed {row['seed']:>3}: {100 * row['success_rate']:.1f} %, peak "
+            f"{row['peak_force_n']:.0f} N{mark}"
+        )
+    name = f"select_seeds_{data['name']}_n{data['validation_episodes']}_s{data['validation_seed']}"
+    print(f"chosen: {data['chosen_policy']}; wrote results/{name}.json, .md")
     return 0
 
 
@@ -1176,12 +1209,28 @@ def build_parser() -> argparse.ArgumentParser:
 
     select = sub.add_parser(
         "select",
-        help="choose a run's policy among its checkpoints on validation starts "
-        "(written as runs/<recipe>_selected_s<seed>/)",
+        help="choose on validation starts a run's policy among its checkpoints (--run; "
+        "written as runs/<recipe>_selected_s<seed>/) or one of a recipe's seeds (--runs)",
     )
-    select.add_argument("--run", required=True, help="a finished run folder (runs/<name>)")
+    chosen_among = select.add_mutually_exclusive_group(required=True)
+    chosen_among.add_argument(
+        "--run", help="a finished run folder (runs/<name>): choose among its checkpoints"
+    )
+    chosen_among.add_argument(
+        "--runs",
+        nargs="+",
+        help="one finished run folder per training seed of one recipe: choose one seed by its "
+        "final policy (highest validation success, then the lower mean peak force, then the "
+        "lower seed)",
+    )
     select.add_argument(
         "--task", default=None, help="the task (a name or a YAML path; default: the run's)"
+    )
+    select.add_argument(
+        "--name",
+        default=None,
+        help="with --runs: the record's name after select_seeds_ (default: the folders' "
+        "common name)",
     )
     select.add_argument("--episodes", type=int, default=100, help="validation starts")
     select.add_argument("--seed", type=int, default=1, help="validation seed (not the test seed)")
@@ -1195,11 +1244,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--from-episode",
         type=int,
         default=0,
-        help="consider the policies saved after this many training episodes",
+        help="with --run: consider the policies saved after this many training episodes",
     )
     select.add_argument("--workers", type=int, default=2)
     select.add_argument(
-        "--overwrite", action="store_true", help="replace an earlier selection of this run"
+        "--overwrite", action="store_true", help="replace an earlier selection of these runs"
     )
     select.set_defaults(func=_cmd_select)
 

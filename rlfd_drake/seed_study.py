@@ -35,7 +35,18 @@ from rlfd_drake.results import (
 from rlfd_drake.run_log import run_log_folders
 from rlfd_drake.train import TrainConfig
 
-__all__ = ["ACTIONS", "SeedRun", "format_spread", "load_seed_run", "seed_study", "study_name"]
+__all__ = [
+    "ACTIONS",
+    "SEED_SELECTION_RULE",
+    "SeedRun",
+    "choose_seed",
+    "format_spread",
+    "load_seed_run",
+    "seed_selection_markdown",
+    "seed_study",
+    "select_seed",
+    "study_name",
+]
 
 #: How a run's policy can act in an evaluation: label -> sample its actions.
 ACTIONS = {"mean": False, "sampled": True}
@@ -130,6 +141,42 @@ def _evaluation_name(
     return name
 
 
+def _run_evaluation(
+    run: SeedRun,
+    task: str,
+    mode: str,
+    composition: str,
+    episodes: int,
+    seed: int,
+    workers: int,
+    stochastic: bool = False,
+    required: tuple[str, ...] = (),
+) -> tuple[str, dict]:
+    """(name, result) of the run's policy evaluated on ``task``: the stored evaluation
+    when one fits, else a new one; ValueError when neither the policy nor a stored
+    evaluation is here (a run folder of another machine without its evaluation)."""
+    evaluation = _evaluation_name(task, str(run.policy), mode, stochastic, seed, episodes)
+    result = stored_or_new_evaluation(
+        task,
+        str(run.policy),
+        evaluation,
+        mode,
+        episodes,
+        seed,
+        workers,
+        stochastic,
+        composition,
+        required=required,
+        available=run.policy.is_file(),
+    )
+    if result is None:
+        raise ValueError(
+            f"run {str(run.folder)!r}: no policy.zip to evaluate and no stored "
+            f"results/{evaluation}.json of {episodes} episodes, seed {seed}"
+        )
+    return evaluation, result
+
+
 def _column_label(column: str) -> str:
     """A column "<task>/<actions>" as "<task name>, <actions>" (a YAML by its stem)."""
     task, _, label = column.rpartition("/")
@@ -212,27 +259,9 @@ def seed_study(
         }
         for task in tasks:
             for label in actions:
-                stochastic = ACTIONS[label]
-                evaluation = _evaluation_name(
-                    task, str(run.policy), mode, stochastic, seed, episodes
+                evaluation, result = _run_evaluation(
+                    run, task, mode, composition, episodes, seed, workers, ACTIONS[label]
                 )
-                result = stored_or_new_evaluation(
-                    task,
-                    str(run.policy),
-                    evaluation,
-                    mode,
-                    episodes,
-                    seed,
-                    workers,
-                    stochastic,
-                    composition,
-                    available=run.policy.is_file(),
-                )
-                if result is None:
-                    raise ValueError(
-                        f"run {str(run.folder)!r}: no policy.zip to evaluate and no stored "
-                        f"results/{evaluation}.json of {episodes} episodes, seed {seed}"
-                    )
                 row["success"][f"{task}/{label}"] = 100.0 * result["success_rate"]
                 row["evaluations"][f"{task}/{label}"] = evaluation
         row["meets_targets"] = all(
@@ -292,6 +321,131 @@ def _refuse_to_drop_a_stored_study(
             f"{path} holds results this study leaves out ({shown}{more}); "
             "pass --overwrite or another --name"
         )
+
+
+#: How ``rlfd select --runs`` chooses one of a recipe's seeds on validation starts
+#: (``full_pose_study.md`` section 39, fixed there before any validation ran).
+SEED_SELECTION_RULE = (
+    "highest validation success; of equal ones the lower mean one-step peak force on "
+    "the validation starts, then the lower seed"
+)
+
+
+def choose_seed(rows: list[dict]) -> int:
+    """The index of the row that :data:`SEED_SELECTION_RULE` chooses; each row has the
+    seed's ``seed``, validation ``success_rate`` and mean ``peak_force_n``."""
+    if not rows:
+        raise ValueError("rows: no seed to choose from")
+    return min(
+        range(len(rows)),
+        key=lambda i: (-rows[i]["success_rate"], rows[i]["peak_force_n"], rows[i]["seed"]),
+    )
+
+
+def select_seed(
+    folders: list[str | Path],
+    task: str | None = None,
+    episodes: int = 100,
+    seed: int = 1,
+    test_seed: int = 0,
+    workers: int = 2,
+    name: str | None = None,
+    overwrite: bool = False,
+) -> dict:
+    """Chooses one of a recipe's training seeds by its final policy's success on
+    ``episodes`` validation starts of ``task`` (None: the task the runs trained on;
+    evaluation seed ``seed``, mean action) by :data:`SEED_SELECTION_RULE`, reusing the
+    evaluations ``rlfd evaluate`` stored; writes the record to
+    ``results/select_seeds_<name>_n<episodes>_s<seed>.{json,md}`` and returns its data.
+
+    Training several seeds and keeping the best on validation is model selection over
+    seeds: its test result is that of one chosen policy, not the recipe's mean over seeds.
+
+    Raises:
+        ValueError: ``seed`` equals ``test_seed``, fewer than two runs, runs of different
+            recipes, or a run with neither a policy nor a stored evaluation.
+        FileExistsError: the record exists and not ``overwrite``.
+    """
+    if seed == test_seed:
+        raise ValueError(
+            f"seed: the validation seed must differ from the test seed ({test_seed}), got "
+            f"{seed}: a seed chosen on the starts it is reported on scores too high"
+        )
+    if episodes <= 0:
+        raise ValueError(f"episodes must be positive, got {episodes}")
+    if len(folders) < 2:
+        raise ValueError(f"folders: give two or more runs (one per seed), got {len(folders)}")
+    runs = sorted((load_seed_run(folder) for folder in folders), key=lambda run: run.seed)
+    _check_one_recipe(runs)
+    task = task if task is not None else runs[0].config["task"]
+    name = name or study_name(folders)
+    record = f"select_seeds_{name}_n{episodes}_s{seed}"
+    new_result_path(record, overwrite)
+    mode = runs[0].config.get("residual_mode", "full")
+    composition = runs[0].config.get("composition", "residual")
+
+    rows = []
+    for run in runs:
+        evaluation, result = _run_evaluation(
+            run, task, mode, composition, episodes, seed, workers, required=("peak_force_n",)
+        )
+        rows.append(
+            {
+                "seed": run.seed,
+                "folder": str(run.folder),
+                "evaluation": evaluation,
+                "success_rate": result["success_rate"],
+                "peak_force_n": result["peak_force_n"],
+                "peak_low_passed_force_n": result.get("peak_low_passed_force_n"),
+            }
+        )
+    chosen = choose_seed(rows)
+    data = {
+        "name": name,
+        "task": task,
+        "validation_seed": seed,
+        "test_seed": test_seed,
+        "validation_episodes": episodes,
+        "rule": SEED_SELECTION_RULE,
+        "recipe": {key: value for key, value in runs[0].config.items() if key != "seed"},
+        "commands": [run.command for run in runs],
+        "candidates": rows,
+        "chosen": chosen,
+        "chosen_seed": rows[chosen]["seed"],
+        "chosen_policy": str(runs[chosen].policy),
+    }
+    write_result(record, data, seed=seed)
+    (results_dir() / f"{record}.md").write_text(seed_selection_markdown(data))
+    return data
+
+
+def seed_selection_markdown(data: dict) -> str:
+    """The seeds' validation results as a Markdown table, the chosen one marked."""
+    lines = [
+        f"# Seed selection: {data['name']}",
+        "",
+        f"Each seed's final policy on {data['validation_episodes']} validation starts of "
+        f"`{data['task']}` (evaluation seed {data['validation_seed']}; the test seed "
+        f"{data['test_seed']} is not used), mean action. Rule: {data['rule']}. Chosen: "
+        f"seed {data['chosen_seed']}, `{data['chosen_policy']}`. Its test result is the "
+        "chosen policy's, not the recipe's mean over seeds.",
+        "",
+        "Training commands:",
+        "",
+        *[f"    {command}" for command in data["commands"] if command],
+        "",
+        "| training seed | validation success | peak / low-passed force (N) | evaluation |",
+        "|---|---|---|---|",
+    ]
+    for index, row in enumerate(data["candidates"]):
+        mark = " **(chosen)**" if index == data["chosen"] else ""
+        low = row["peak_low_passed_force_n"]
+        lines.append(
+            f"| {row['seed']}{mark} | {100 * row['success_rate']:.1f} % | "
+            f"{row['peak_force_n']:.0f} / {'-' if low is None else f'{low:.0f}'} | "
+            f"`{row['evaluation']}` |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _unknown_wall(resumed_at_episode: int | None) -> str:

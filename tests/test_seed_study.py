@@ -14,7 +14,13 @@ from rlfd_drake.diagram import RlfdDiagramConfig
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.paths import SHIPPED_POLICY, model_path
 from rlfd_drake.results import write_result
-from rlfd_drake.seed_study import load_seed_run, seed_study, study_name
+from rlfd_drake.seed_study import (
+    choose_seed,
+    load_seed_run,
+    seed_study,
+    select_seed,
+    study_name,
+)
 from rlfd_drake.tasks import load_task
 
 RECIPE = {"task": "peg_easy", "algo": "sac", "episodes": 700, "residual_mode": "translation"}
@@ -32,21 +38,26 @@ def _run_folder(tmp_path, seed, **changes):
     return folder
 
 
-def _store_evaluation(folder, task, stochastic, success_rate, episodes=200, counted=False):
+def _store_evaluation(
+    folder, task, stochastic, success_rate, episodes=200, counted=False, seed=0, **figures
+):
     """Stores an evaluation under the name studies used first, or (``counted``) under
     ``rlfd evaluate --episodes N``'s, which carries the count."""
     count = {"episodes": episodes} if counted else {}
-    name = evaluation_name(task, str(folder / "policy.zip"), "translation", stochastic, 0, **count)
+    name = evaluation_name(
+        task, str(folder / "policy.zip"), "translation", stochastic, seed, **count
+    )
     bounds = list(RlfdDiagramConfig().residual_bounds(load_task(task)))
     data = {
         "task": task,
         "episodes": episodes,
-        "seed": 0,
+        "seed": seed,
         "composition": "residual",
         "residual_bounds": bounds,
         "success_rate": success_rate,
+        **figures,
     }
-    write_result(name, data, seed=0, command="rlfd evaluate (stored for the test)")
+    write_result(name, data, seed=seed, command="rlfd evaluate (stored for the test)")
 
 
 def _never_evaluate(*args, **kwargs):
@@ -217,3 +228,57 @@ def test_a_stored_study_is_replaced_only_by_one_that_keeps_all_of_it(tmp_path, m
     assert [row["seed"] for row in shrunk["per_seed"]] == [0, 1]
     seed_study(folders[1:], ["peg_easy"], actions=("mean",), name="recipe_late")
     assert (tmp_path / "results" / "seeds_recipe_late.json").exists()
+
+
+def test_a_seed_is_chosen_by_validation_success_then_lower_peak_then_lower_seed():
+    def row(seed, success, peak):
+        return {"seed": seed, "success_rate": success, "peak_force_n": peak}
+
+    assert choose_seed([row(0, 0.95, 100.0), row(1, 1.0, 140.0), row(2, 0.99, 90.0)]) == 1
+    # Equal success: the lower peak; equal peak too: the lower seed, wherever it stands.
+    assert choose_seed([row(3, 0.98, 130.0), row(4, 0.98, 120.0), row(5, 0.97, 50.0)]) == 1
+    assert choose_seed([row(7, 0.98, 120.0), row(6, 0.98, 120.0)]) == 1
+    with pytest.raises(ValueError, match="no seed"):
+        choose_seed([])
+
+
+def test_select_chooses_a_seed_on_stored_validation_starts_and_records_it(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    validation = {0: (0.97, 110.0), 1: (0.99, 150.0), 2: (0.99, 120.0)}
+    folders = []
+    for seed, (rate, peak) in validation.items():
+        folder = _run_folder(tmp_path, seed)
+        folders.append(str(folder))
+        _store_evaluation(
+            folder, "peg_easy", False, rate, episodes=100, counted=True, seed=1,
+            peak_force_n=peak, peak_low_passed_force_n=peak / 2,
+        )  # fmt: skip
+    assert main(["select", "--runs", *folders, "--episodes", "100", "--seed", "1"]) == 0
+    assert "seed   2: 99.0 %, peak 120 N  <- chosen" in capsys.readouterr().out
+    record = json.loads((tmp_path / "results" / "select_seeds_recipe_n100_s1.json").read_text())
+    data = record["data"]
+    assert (data["chosen_seed"], data["task"], data["test_seed"]) == (2, "peg_easy", 0)
+    assert data["chosen_policy"].endswith("recipe_s2/policy.zip")
+    assert [row["seed"] for row in data["candidates"]] == [0, 1, 2]
+    markdown = (tmp_path / "results" / "select_seeds_recipe_n100_s1.md").read_text()
+    assert "| 2 **(chosen)** | 99.0 % | 120 / 60 |" in markdown
+    # The record is not replaced without --overwrite; the test seed is never validation.
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        select_seed(folders, episodes=100, seed=1)
+    select_seed(folders, episodes=100, seed=1, overwrite=True)
+    with pytest.raises(ValueError, match="validation seed must differ from the test seed"):
+        select_seed(folders, episodes=100, seed=0, name="other")
+    with pytest.raises(ValueError, match="two or more runs"):
+        select_seed(folders[:1], episodes=100, seed=1, name="other")
+    _run_folder(tmp_path, 5, algo="ppo")
+    with pytest.raises(ValueError, match="differ in algo"):
+        select_seed([folders[0], str(tmp_path / "runs" / "recipe_s5")], seed=1, name="other")
+    with pytest.raises(ValueError, match="no policy.zip to evaluate and no stored"):
+        select_seed(folders, episodes=50, seed=1, name="other")
+    assert main(["select", "--runs", *folders, "--from-episode", "300"]) == 2
+    assert "--from-episode chooses among a run's checkpoints" in capsys.readouterr().err
+    assert main(["select", "--run", folders[0], "--name", "other"]) == 2
+    assert "--name names a selection among seeds" in capsys.readouterr().err
