@@ -31,6 +31,7 @@ from rlfd_drake.run_log import read_episode_log, read_episode_rows
 
 __all__ = [
     "Candidate",
+    "check_validation_starts",
     "choose_candidate",
     "run_candidates",
     "select_checkpoint",
@@ -92,6 +93,19 @@ def run_candidates(run_dir: str | Path, from_episode: int = 0) -> list[Candidate
     return chosen
 
 
+def check_validation_starts(episodes: int, seed: int, test_seed: int, chosen: str) -> None:
+    """ValueError unless ``episodes`` validation starts of evaluation ``seed`` can choose
+    ``chosen`` (e.g. "a checkpoint"): a positive count, and not the test seed's starts,
+    on which a choice would score too high."""
+    if seed == test_seed:
+        raise ValueError(
+            f"seed: the validation seed must differ from the test seed ({test_seed}), got "
+            f"{seed}: {chosen} chosen on the starts it is reported on scores too high"
+        )
+    if episodes <= 0:
+        raise ValueError(f"episodes must be positive, got {episodes}")
+
+
 def choose_candidate(success_rates: list[float]) -> int:
     """The index of the highest validation success; of equal ones the latest (the
     candidates are oldest first: more training, the same validation evidence)."""
@@ -133,13 +147,7 @@ def select_checkpoint(
     from rlfd_drake import evaluate as evaluate_module
 
     run_dir = Path(run_dir)
-    if seed == test_seed:
-        raise ValueError(
-            f"seed: the validation seed must differ from the test seed ({test_seed}), got "
-            f"{seed}: a checkpoint chosen on the starts it is reported on scores too high"
-        )
-    if episodes <= 0:
-        raise ValueError(f"episodes must be positive, got {episodes}")
+    check_validation_starts(episodes, seed, test_seed, "a checkpoint")
     candidates = run_candidates(run_dir, from_episode)
     config_record = json.loads((run_dir / "config.json").read_text())
     config = config_record["config"]

@@ -594,7 +594,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
 
 
 def _select_seed(args: argparse.Namespace) -> int:
-    from rlfd_drake.seed_study import select_seed
+    from rlfd_drake.seed_study import seed_selection_name, select_seed
 
     if args.from_episode:
         raise ValueError(
@@ -617,7 +617,7 @@ def _select_seed(args: argparse.Namespace) -> int:
             f"seed {row['seed']:>3}: {100 * row['success_rate']:.1f} %, peak "
             f"{row['peak_force_n']:.0f} N{mark}"
         )
-    name = f"select_seeds_{data['name']}_n{data['validation_episodes']}_s{data['validation_seed']}"
+    name = seed_selection_name(data["name"], data["validation_episodes"], data["validation_seed"])
     print(f"chosen: {data['chosen_policy']}; wrote results/{name}.json, .md")
     return 0
 

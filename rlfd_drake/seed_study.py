@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from rlfd_drake.checkpoint_selection import check_validation_starts
 from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.reproduce import stored_or_new_evaluation
 from rlfd_drake.results import (
@@ -43,6 +44,7 @@ __all__ = [
     "format_spread",
     "load_seed_run",
     "seed_selection_markdown",
+    "seed_selection_name",
     "seed_study",
     "select_seed",
     "study_name",
@@ -342,6 +344,11 @@ def choose_seed(rows: list[dict]) -> int:
     )
 
 
+def seed_selection_name(name: str, episodes: int, seed: int) -> str:
+    """The results stem of a seed selection: ``select_seeds_<name>_n<episodes>_s<seed>``."""
+    return f"select_seeds_{name}_n{episodes}_s{seed}"
+
+
 def select_seed(
     folders: list[str | Path],
     task: str | None = None,
@@ -366,20 +373,14 @@ def select_seed(
             recipes, or a run with neither a policy nor a stored evaluation.
         FileExistsError: the record exists and not ``overwrite``.
     """
-    if seed == test_seed:
-        raise ValueError(
-            f"seed: the validation seed must differ from the test seed ({test_seed}), got "
-            f"{seed}: a seed chosen on the starts it is reported on scores too high"
-        )
-    if episodes <= 0:
-        raise ValueError(f"episodes must be positive, got {episodes}")
+    check_validation_starts(episodes, seed, test_seed, "a seed")
     if len(folders) < 2:
         raise ValueError(f"folders: give two or more runs (one per seed), got {len(folders)}")
     runs = sorted((load_seed_run(folder) for folder in folders), key=lambda run: run.seed)
     _check_one_recipe(runs)
     task = task if task is not None else runs[0].config["task"]
     name = name or study_name(folders)
-    record = f"select_seeds_{name}_n{episodes}_s{seed}"
+    record = seed_selection_name(name, episodes, seed)
     new_result_path(record, overwrite)
     mode = runs[0].config.get("residual_mode", "full")
     composition = runs[0].config.get("composition", "residual")
