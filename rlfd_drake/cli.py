@@ -571,6 +571,12 @@ def _cmd_select(args: argparse.Namespace) -> int:
         return _select_seed(args)
     if args.name is not None:
         raise ValueError(f"--name names a selection among seeds (--runs), got --run {args.run}")
+    for option in ("test_episodes", "test_task", "target"):
+        if getattr(args, option) is not None:
+            raise ValueError(
+                f"--{option.replace('_', '-')} judges a selection among seeds (--runs) on test "
+                f"starts, got --run {args.run}"
+            )
     from rlfd_drake.checkpoint_selection import select_checkpoint
 
     data = select_checkpoint(
@@ -610,12 +616,16 @@ def _select_seed(args: argparse.Namespace) -> int:
         workers=args.workers,
         name=args.name,
         overwrite=args.overwrite,
+        test_episodes=args.test_episodes,
+        test_task=args.test_task,
+        target=args.target,
     )
     for index, row in enumerate(data["candidates"]):
         mark = "  <- chosen" if index == data["chosen"] else ""
+        test = f", test {100 * row['test_success_rate']:.1f} %" if "test" in data else ""
         print(
             f"seed {row['seed']:>3}: {100 * row['success_rate']:.1f} %, peak "
-            f"{row['peak_force_n']:.0f} N{mark}"
+            f"{row['peak_force_n']:.0f} N{test}{mark}"
         )
     name = seed_selection_name(data["name"], data["validation_episodes"], data["validation_seed"])
     print(f"chosen: {data['chosen_policy']}; wrote results/{name}.json, .md")
@@ -1245,6 +1255,24 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="with --run: consider the policies saved after this many training episodes",
+    )
+    select.add_argument(
+        "--test-episodes",
+        type=int,
+        default=None,
+        help="with --runs: also judge the rule on this many test starts (--test-seed) of "
+        "every seed: rank agreement with validation and the best of k seeds for every k",
+    )
+    select.add_argument(
+        "--test-task",
+        default=None,
+        help="with --test-episodes: the task tested on (default: the runs' training task)",
+    )
+    select.add_argument(
+        "--target",
+        type=float,
+        default=None,
+        help="with --test-episodes: a test success %%; count the best-of-k choices reaching it",
     )
     select.add_argument("--workers", type=int, default=2)
     select.add_argument(

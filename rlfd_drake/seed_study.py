@@ -19,9 +19,12 @@ stored evaluations.
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass, fields
 from pathlib import Path
+
+import numpy as np
 
 from rlfd_drake.checkpoint_selection import check_validation_starts
 from rlfd_drake.evaluate import evaluation_name
@@ -40,13 +43,16 @@ __all__ = [
     "ACTIONS",
     "SEED_SELECTION_RULE",
     "SeedRun",
+    "best_of_k",
     "choose_seed",
     "format_spread",
     "load_seed_run",
+    "rule_order",
     "seed_selection_markdown",
     "seed_selection_name",
     "seed_study",
     "select_seed",
+    "spearman",
     "study_name",
 ]
 
@@ -338,10 +344,78 @@ def choose_seed(rows: list[dict]) -> int:
     seed's ``seed``, validation ``success_rate`` and mean ``peak_force_n``."""
     if not rows:
         raise ValueError("rows: no seed to choose from")
-    return min(
+    return rule_order(rows)[0]
+
+
+def rule_order(rows: list[dict]) -> list[int]:
+    """The rows' indices in the order :data:`SEED_SELECTION_RULE` prefers them, best first
+    (``choose_seed`` is the first)."""
+    return sorted(
         range(len(rows)),
         key=lambda i: (-rows[i]["success_rate"], rows[i]["peak_force_n"], rows[i]["seed"]),
     )
+
+
+def best_of_k(ranked_test_rates: list[float], target: float | None = None) -> list[dict]:
+    """What choosing by the rule buys when k of the n seeds are trained, for k = 1..n:
+    over all C(n, k) subsets of the seeds, the mean test success of the seed the rule
+    chooses in each, and (given ``target``, a rate) in how many the choice reaches it.
+
+    ``ranked_test_rates`` are the seeds' test success rates in the rule's order (best on
+    validation first, :func:`rule_order`). Exact, without enumerating subsets: the seed
+    ranked r-th (from 0) is chosen in the C(n-1-r, k-1) subsets that hold it and only
+    seeds ranked below it.
+    """
+    n = len(ranked_test_rates)
+    if n == 0:
+        raise ValueError("ranked_test_rates: no seed")
+    rows = []
+    for k in range(1, n + 1):
+        chosen_in = [math.comb(n - 1 - r, k - 1) for r in range(n)]
+        counted = list(zip(chosen_in, ranked_test_rates, strict=True))
+        subsets = math.comb(n, k)
+        row = {
+            "k": k,
+            "subsets": subsets,
+            "mean_chosen_test_success_rate": sum(count * rate for count, rate in counted) / subsets,
+        }
+        if target is not None:
+            row["chosen_at_target"] = sum(count for count, rate in counted if rate >= target)
+        rows.append(row)
+    return rows
+
+
+def spearman(x: list[float], y: list[float], permutations: int = 20000, seed: int = 0) -> dict:
+    """Spearman's rank correlation of ``x`` and ``y`` (ties get their mean rank) and its
+    two-sided permutation p-value (``permutations`` shuffles of ``y``'s ranks, seeded, so
+    the same numbers give the same p; the +1s count the observed order as one shuffle)."""
+    if len(x) != len(y):
+        raise ValueError(f"y: {len(y)} values for {len(x)} x values")
+    if len(x) < 3:
+        raise ValueError(f"x: a rank correlation needs three or more pairs, got {len(x)}")
+    rank_x, rank_y = _mean_ranks(x), _mean_ranks(y)
+    if np.ptp(rank_x) == 0 or np.ptp(rank_y) == 0:
+        return {"rho": None, "p": None, "permutations": permutations}
+    rho = float(np.corrcoef(rank_x, rank_y)[0, 1])
+    rng = np.random.default_rng(seed)
+    shuffled = np.array([rng.permutation(rank_y) for _ in range(permutations)])
+    centred_x = rank_x - rank_x.mean()
+    centred = shuffled - shuffled.mean(axis=1, keepdims=True)
+    rhos = centred @ centred_x / (np.linalg.norm(centred, axis=1) * np.linalg.norm(centred_x))
+    extreme = int(np.sum(np.abs(rhos) >= abs(rho) - 1e-12))
+    return {"rho": rho, "p": (extreme + 1) / (permutations + 1), "permutations": permutations}
+
+
+def _mean_ranks(values: list[float]) -> np.ndarray:
+    """Ranks from 1, tied values sharing their mean rank."""
+    values = np.asarray(values, dtype=float)
+    order = np.argsort(values, kind="stable")
+    ranks = np.empty(len(values))
+    ranks[order] = np.arange(1, len(values) + 1)
+    for value in np.unique(values):
+        tied = values == value
+        ranks[tied] = ranks[tied].mean()
+    return ranks
 
 
 def seed_selection_name(name: str, episodes: int, seed: int) -> str:
@@ -358,6 +432,9 @@ def select_seed(
     workers: int = 2,
     name: str | None = None,
     overwrite: bool = False,
+    test_episodes: int | None = None,
+    test_task: str | None = None,
+    target: float | None = None,
 ) -> dict:
     """Chooses one of a recipe's training seeds by its final policy's success on
     ``episodes`` validation starts of ``task`` (None: the task the runs trained on;
@@ -368,12 +445,26 @@ def select_seed(
     Training several seeds and keeping the best on validation is model selection over
     seeds: its test result is that of one chosen policy, not the recipe's mean over seeds.
 
+    Given ``test_episodes``, every seed is also evaluated (or its stored evaluation read)
+    on that many starts of ``test_task`` (None: the runs' training task) at ``test_seed``,
+    and the record judges the rule on them: the rank correlation of validation and test
+    success, the chosen seed's test success, and :func:`best_of_k` (with ``target``, a
+    success %, how often the choice among k seeds reaches it).
+
     Raises:
         ValueError: ``seed`` equals ``test_seed``, fewer than two runs, runs of different
-            recipes, or a run with neither a policy nor a stored evaluation.
+            recipes, a run with neither a policy nor a stored evaluation, a
+            ``test_episodes`` that is not positive, or a ``target`` outside [0, 100] or
+            without ``test_episodes``.
         FileExistsError: the record exists and not ``overwrite``.
     """
     check_validation_starts(episodes, seed, test_seed, "a seed")
+    if test_episodes is not None and test_episodes <= 0:
+        raise ValueError(f"test_episodes must be positive, got {test_episodes}")
+    if target is not None and test_episodes is None:
+        raise ValueError(f"target: {target} % is judged on test starts; give test_episodes")
+    if target is not None and not 0 <= target <= 100:
+        raise ValueError(f"target must be a success % in [0, 100], got {target}")
     if len(folders) < 2:
         raise ValueError(f"folders: give two or more runs (one per seed), got {len(folders)}")
     runs = sorted((load_seed_run(folder) for folder in folders), key=lambda run: run.seed)
@@ -415,9 +506,34 @@ def select_seed(
         "chosen_seed": rows[chosen]["seed"],
         "chosen_policy": str(runs[chosen].policy),
     }
+    if test_episodes is not None:
+        test_task = test_task if test_task is not None else runs[0].config["task"]
+        for run, row in zip(runs, rows, strict=True):
+            row["test_evaluation"], result = _run_evaluation(
+                run, test_task, mode, composition, test_episodes, test_seed, workers
+            )
+            row["test_success_rate"] = result["success_rate"]
+        data["test"] = _judged_on_test(rows, test_task, test_episodes, target)
     write_result(record, data, seed=seed)
     (results_dir() / f"{record}.md").write_text(seed_selection_markdown(data))
     return data
+
+
+def _judged_on_test(rows: list[dict], task: str, episodes: int, target: float | None) -> dict:
+    """How the rule's choices among these seeds fare on their test success."""
+    order = rule_order(rows)
+    test_rates = [row["test_success_rate"] for row in rows]
+    return {
+        "task": task,
+        "episodes": episodes,
+        "target_percent": target,
+        "chosen_test_success_rate": test_rates[order[0]],
+        "spearman_validation_test": spearman([row["success_rate"] for row in rows], test_rates),
+        "over_seeds": spread_over_seeds([100.0 * rate for rate in test_rates]),
+        "best_of_k": best_of_k(
+            [test_rates[i] for i in order], None if target is None else target / 100.0
+        ),
+    }
 
 
 def seed_selection_markdown(data: dict) -> str:
@@ -435,18 +551,61 @@ def seed_selection_markdown(data: dict) -> str:
         "",
         *[f"    {command}" for command in data["commands"] if command],
         "",
-        "| training seed | validation success | peak / low-passed force (N) | evaluation |",
-        "|---|---|---|---|",
+    ]
+    test = data.get("test")
+    test_header = f" test success ({test['episodes']} starts) |" if test else ""
+    lines += [
+        f"| training seed | validation success | peak / low-passed force (N) |{test_header} "
+        "evaluation |",
+        "|---|---|---|" + ("---|" if test else "") + "---|",
     ]
     for index, row in enumerate(data["candidates"]):
         mark = " **(chosen)**" if index == data["chosen"] else ""
         low = row["peak_low_passed_force_n"]
+        test_cell = f" {100 * row['test_success_rate']:.1f} % |" if test else ""
         lines.append(
             f"| {row['seed']}{mark} | {100 * row['success_rate']:.1f} % | "
-            f"{row['peak_force_n']:.0f} / {'-' if low is None else f'{low:.0f}'} | "
+            f"{row['peak_force_n']:.0f} / {'-' if low is None else f'{low:.0f}'} |{test_cell} "
             f"`{row['evaluation']}` |"
         )
+    if test:
+        lines += _test_judgement_lines(data, test)
     return "\n".join(lines) + "\n"
+
+
+def _test_judgement_lines(data: dict, test: dict) -> list[str]:
+    """The rule judged on the test starts: rank agreement and the best of k seeds."""
+    rank = test["spearman_validation_test"]
+    agreement = (
+        "undefined (one of them is the same for every seed)"
+        if rank["rho"] is None
+        else f"{rank['rho']:.2f} (permutation p {rank['p']:.2g})"
+    )
+    target = test["target_percent"]
+    lines = [
+        "",
+        f"On {test['episodes']} test starts of `{test['task']}` (evaluation seed "
+        f"{data['test_seed']}): the chosen seed {100 * test['chosen_test_success_rate']:.1f} %; "
+        f"the recipe over the {len(data['candidates'])} seeds "
+        f"{format_spread(test['over_seeds'])} %; Spearman rank correlation of validation "
+        f"and test success {agreement}.",
+        "",
+        "The rule's choice when only k of these seeds are trained, over every k-subset:",
+        "",
+        "| seeds trained, k | subsets | chosen policy's test success, mean |"
+        + (f" subsets whose choice reaches {target:g} % |" if target is not None else ""),
+        "|---|---|---|" + ("---|" if target is not None else ""),
+    ]
+    for row in test["best_of_k"]:
+        at_target = ""
+        if target is not None:
+            share = 100 * row["chosen_at_target"] / row["subsets"]
+            at_target = f" {row['chosen_at_target']:,} ({share:.0f} %) |"
+        lines.append(
+            f"| {row['k']} | {row['subsets']:,} | "
+            f"{100 * row['mean_chosen_test_success_rate']:.1f} % |{at_target}"
+        )
+    return lines
 
 
 def _unknown_wall(resumed_at_episode: int | None) -> str:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,10 +17,13 @@ from rlfd_drake.evaluate import evaluation_name
 from rlfd_drake.paths import SHIPPED_POLICY, model_path
 from rlfd_drake.results import write_result
 from rlfd_drake.seed_study import (
+    best_of_k,
     choose_seed,
     load_seed_run,
+    rule_order,
     seed_study,
     select_seed,
+    spearman,
     study_name,
 )
 from rlfd_drake.tasks import load_task
@@ -230,6 +235,20 @@ def test_a_stored_study_is_replaced_only_by_one_that_keeps_all_of_it(tmp_path, m
     assert (tmp_path / "results" / "seeds_recipe_late.json").exists()
 
 
+def _seeds_validated(tmp_path, validation: dict) -> list[str]:
+    """Run folders of a recipe's seeds, each with a stored evaluation on 100 validation
+    starts of evaluation seed 1: {seed: (success rate, mean peak force)}."""
+    folders = []
+    for seed, (rate, peak) in validation.items():
+        folder = _run_folder(tmp_path, seed)
+        folders.append(str(folder))
+        _store_evaluation(
+            folder, "peg_easy", False, rate, episodes=100, counted=True, seed=1,
+            peak_force_n=peak, peak_low_passed_force_n=peak / 2,
+        )  # fmt: skip
+    return folders
+
+
 def test_a_seed_is_chosen_by_validation_success_then_lower_peak_then_lower_seed():
     def row(seed, success, peak):
         return {"seed": seed, "success_rate": success, "peak_force_n": peak}
@@ -247,15 +266,7 @@ def test_select_chooses_a_seed_on_stored_validation_starts_and_records_it(
 ):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
-    validation = {0: (0.97, 110.0), 1: (0.99, 150.0), 2: (0.99, 120.0)}
-    folders = []
-    for seed, (rate, peak) in validation.items():
-        folder = _run_folder(tmp_path, seed)
-        folders.append(str(folder))
-        _store_evaluation(
-            folder, "peg_easy", False, rate, episodes=100, counted=True, seed=1,
-            peak_force_n=peak, peak_low_passed_force_n=peak / 2,
-        )  # fmt: skip
+    folders = _seeds_validated(tmp_path, {0: (0.97, 110.0), 1: (0.99, 150.0), 2: (0.99, 120.0)})
     assert main(["select", "--runs", *folders, "--episodes", "100", "--seed", "1"]) == 0
     assert "seed   2: 99.0 %, peak 120 N  <- chosen" in capsys.readouterr().out
     record = json.loads((tmp_path / "results" / "select_seeds_recipe_n100_s1.json").read_text())
@@ -282,3 +293,87 @@ def test_select_chooses_a_seed_on_stored_validation_starts_and_records_it(
     assert "--from-episode chooses among a run's checkpoints" in capsys.readouterr().err
     assert main(["select", "--run", folders[0], "--name", "other"]) == 2
     assert "--name names a selection among seeds" in capsys.readouterr().err
+
+
+def test_best_of_k_equals_the_rule_applied_to_every_subset():
+    rng = np.random.default_rng(3)
+    rows = [
+        {"seed": seed, "success_rate": rate, "peak_force_n": peak}
+        for seed, rate, peak in zip(
+            range(9), rng.choice([0.95, 0.97, 0.99, 1.0], 9), rng.uniform(100, 150, 9), strict=True
+        )
+    ]
+    test = rng.choice([0.9, 0.95, 0.98, 0.995], 9)
+    table = best_of_k([test[i] for i in rule_order(rows)], target=0.98)
+    assert [row["k"] for row in table] == list(range(1, 10))
+    for row in table:
+        subsets = list(itertools.combinations(range(9), row["k"]))
+        chosen = [test[s[choose_seed([rows[i] for i in s])]] for s in subsets]
+        assert row["subsets"] == len(subsets)
+        assert row["mean_chosen_test_success_rate"] == pytest.approx(np.mean(chosen))
+        assert row["chosen_at_target"] == sum(rate >= 0.98 for rate in chosen)
+    # One seed trained: the recipe's mean; all trained: the rule's first choice.
+    assert table[0]["mean_chosen_test_success_rate"] == pytest.approx(test.mean())
+    assert table[-1]["mean_chosen_test_success_rate"] == test[choose_seed(rows)]
+    assert "chosen_at_target" not in best_of_k([0.9, 0.8])[0]
+    with pytest.raises(ValueError, match="no seed"):
+        best_of_k([])
+
+
+def test_spearman_matches_known_rank_correlations_and_exact_p_values():
+    # d = (1, 1, 1, 1, 0): rho = 1 - 6 * 4 / (5 * 24) = 0.8; of the 120 orders of five,
+    # 16 are at least as far from independence either way: exact two-sided p = 0.133.
+    result = spearman([1, 2, 3, 4, 5], [2, 1, 4, 3, 5])
+    assert result["rho"] == pytest.approx(0.8)
+    assert result["p"] == pytest.approx(16 / 120, abs=0.01)
+    assert spearman([1, 2, 3, 4, 5], [2, 1, 4, 3, 5]) == result  # seeded
+    monotone = spearman([0.1, 0.5, 0.2, 0.9, 0.7, 0.3, 0.8], [1, 125, 8, 729, 343, 27, 512])
+    assert monotone["rho"] == pytest.approx(1.0)
+    assert monotone["p"] < 0.001
+    assert spearman([3, 2, 1], [1, 2, 3])["rho"] == pytest.approx(-1.0)
+    # Ties share their mean rank: (1, 2.5, 2.5, 4) against (1, 2, 3, 4), 4.5 / sqrt(4.5 * 5).
+    assert spearman([1, 2, 2, 3], [1, 2, 3, 4])["rho"] == pytest.approx(np.sqrt(0.9))
+    assert spearman([1, 1, 1], [1, 2, 3])["rho"] is None
+    with pytest.raises(ValueError, match="three or more"):
+        spearman([1, 2], [2, 1])
+    with pytest.raises(ValueError, match="y: 2 values for 3"):
+        spearman([1, 2, 3], [2, 1])
+
+
+def test_select_judges_its_rule_on_the_test_starts_when_asked(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    # seed: (validation, its mean peak, test); the rule's order is 2, 1, 0.
+    figures = {0: (0.97, 110.0, 0.99), 1: (0.99, 150.0, 0.95), 2: (0.99, 120.0, 0.92)}
+    folders = _seeds_validated(
+        tmp_path, {seed: (rate, peak) for seed, (rate, peak, _) in figures.items()}
+    )
+    for folder, (_, _, test) in zip(folders, figures.values(), strict=True):
+        _store_evaluation(Path(folder), "peg_easy", False, test, episodes=200, counted=True, seed=0)
+    args = ["select", "--runs", *folders, "--seed", "1", "--test-episodes", "200"]
+    assert main([*args, "--target", "98"]) == 0
+    assert "seed   2: 99.0 %, peak 120 N, test 92.0 %  <- chosen" in capsys.readouterr().out
+    data = json.loads((tmp_path / "results" / "select_seeds_recipe_n100_s1.json").read_text())
+    test = data["data"]["test"]
+    assert (test["task"], test["episodes"], test["target_percent"]) == ("peg_easy", 200, 98.0)
+    assert test["chosen_test_success_rate"] == 0.92
+    assert test["spearman_validation_test"]["rho"] == pytest.approx(-0.866, abs=1e-3)
+    # k = 2: {0, 1} chooses 1 (95 %), {0, 2} and {1, 2} choose 2 (92 %).
+    pairs = test["best_of_k"][1]
+    assert pairs["mean_chosen_test_success_rate"] == pytest.approx((0.95 + 2 * 0.92) / 3)
+    assert pairs["chosen_at_target"] == 0
+    assert test["best_of_k"][0]["chosen_at_target"] == 1
+    markdown = (tmp_path / "results" / "select_seeds_recipe_n100_s1.md").read_text()
+    assert "| 2 **(chosen)** | 99.0 % | 120 / 60 | 92.0 % |" in markdown
+    assert "| 2 | 3 | 93.0 % | 0 (0 %) |" in markdown
+    assert "the chosen seed 92.0 %; the recipe over the 3 seeds 95.3 +- 3.5 %" in markdown
+    # Refused: a target without test starts or outside 0-100, no test starts, and the
+    # test options with --run (a choice among checkpoints).
+    with pytest.raises(ValueError, match="give test_episodes"):
+        select_seed(folders, seed=1, target=98.0, name="other")
+    with pytest.raises(ValueError, match="target must be a success % in"):
+        select_seed(folders, seed=1, test_episodes=200, target=0.98e3, name="other")
+    with pytest.raises(ValueError, match="test_episodes must be positive, got 0"):
+        select_seed(folders, seed=1, test_episodes=0, name="other")
+    assert main(["select", "--run", folders[0], "--test-episodes", "200"]) == 2
+    assert "--test-episodes judges a selection among seeds" in capsys.readouterr().err
