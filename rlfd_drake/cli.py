@@ -577,13 +577,18 @@ def _cmd_select(args: argparse.Namespace) -> int:
                 f"--{option.replace('_', '-')} judges a selection among seeds (--runs) on test "
                 f"starts, got --run {args.run}"
             )
+    if len(args.seed) > 1 or len(args.episodes) > 1:
+        raise ValueError(
+            f"--seed and --episodes take one value when choosing a checkpoint (--run), got "
+            f"--seed {args.seed} --episodes {args.episodes}"
+        )
     from rlfd_drake.checkpoint_selection import select_checkpoint
 
     data = select_checkpoint(
         args.run,
         args.task,
-        episodes=args.episodes,
-        seed=args.seed,
+        episodes=args.episodes[0],
+        seed=args.seed[0],
         test_seed=args.test_seed,
         workers=args.workers,
         from_episode=args.from_episode,
@@ -610,8 +615,8 @@ def _select_seed(args: argparse.Namespace) -> int:
     data = select_seed(
         args.runs,
         args.task,
-        episodes=args.episodes,
-        seed=args.seed,
+        episodes=args.episodes[0] if len(args.episodes) == 1 else args.episodes,
+        seed=args.seed[0] if len(args.seed) == 1 else args.seed,
         test_seed=args.test_seed,
         workers=args.workers,
         name=args.name,
@@ -1242,8 +1247,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --runs: the record's name after select_seeds_ (default: the folders' "
         "common name)",
     )
-    select.add_argument("--episodes", type=int, default=100, help="validation starts")
-    select.add_argument("--seed", type=int, default=1, help="validation seed (not the test seed)")
+    select.add_argument(
+        "--episodes",
+        type=int,
+        nargs="+",
+        default=[100],
+        help="validation starts (with --runs and several --seed: one count or one per seed)",
+    )
+    select.add_argument(
+        "--seed",
+        type=int,
+        nargs="+",
+        default=[1],
+        help="validation seed, not the test seed (with --runs several may be given: their "
+        "starts are pooled)",
+    )
     select.add_argument(
         "--test-seed",
         type=int,

@@ -418,16 +418,41 @@ def _mean_ranks(values: list[float]) -> np.ndarray:
     return ranks
 
 
-def seed_selection_name(name: str, episodes: int, seed: int) -> str:
-    """The results stem of a seed selection: ``select_seeds_<name>_n<episodes>_s<seed>``."""
-    return f"select_seeds_{name}_n{episodes}_s{seed}"
+def seed_selection_name(name: str, episodes: int | list[int], seed: int | list[int]) -> str:
+    """The results stem of a seed selection: ``select_seeds_<name>_n<episodes>_s<seed>``;
+    validation starts of several seeds pooled join theirs with "+" (``_n100+200_s1+4``)."""
+    return f"select_seeds_{name}_n{_joined(episodes)}_s{_joined(seed)}"
+
+
+def _joined(value: int | list[int]) -> str:
+    return "+".join(str(v) for v in value) if isinstance(value, list) else str(value)
+
+
+def _validation_sets(
+    episodes: int | list[int], seed: int | list[int], test_seed: int
+) -> list[tuple[int, int]]:
+    """(episodes, seed) of each set of validation starts, checked: one count for every
+    seed or one per seed, each seed once, none the test seed."""
+    seeds = seed if isinstance(seed, list) else [seed]
+    counts = episodes if isinstance(episodes, list) else [episodes] * len(seeds)
+    if not seeds:
+        raise ValueError("seed: give at least one validation seed")
+    if len(counts) != len(seeds):
+        raise ValueError(
+            f"episodes: give one count or one per validation seed ({len(seeds)}), got {counts}"
+        )
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seed: each validation seed once, got {seeds}")
+    for count, validation_seed in zip(counts, seeds, strict=True):
+        check_validation_starts(count, validation_seed, test_seed, "a seed")
+    return list(zip(counts, seeds, strict=True))
 
 
 def select_seed(
     folders: list[str | Path],
     task: str | None = None,
-    episodes: int = 100,
-    seed: int = 1,
+    episodes: int | list[int] = 100,
+    seed: int | list[int] = 1,
     test_seed: int = 0,
     workers: int = 2,
     name: str | None = None,
@@ -445,6 +470,10 @@ def select_seed(
     Training several seeds and keeping the best on validation is model selection over
     seeds: its test result is that of one chosen policy, not the recipe's mean over seeds.
 
+    ``seed`` may be a list: the starts of those evaluation seeds are pooled (``episodes``
+    one count for all or a list, one per seed), each seed's success and mean peaks
+    weighted by its starts, e.g. a stored 100 of seed 1 and 200 new ones of seed 4.
+
     Given ``test_episodes``, every seed is also evaluated (or its stored evaluation read)
     on that many starts of ``test_task`` (None: the runs' training task) at ``test_seed``,
     and the record judges the rule on them: the rank correlation of validation and test
@@ -452,13 +481,14 @@ def select_seed(
     success %, how often the choice among k seeds reaches it).
 
     Raises:
-        ValueError: ``seed`` equals ``test_seed``, fewer than two runs, runs of different
+        ValueError: a validation ``seed`` equals ``test_seed`` or is given twice,
+            ``episodes`` neither one count nor one per seed, fewer than two runs, runs of different
             recipes, a run with neither a policy nor a stored evaluation, a
             ``test_episodes`` that is not positive, or a ``target`` outside [0, 100] or
             without ``test_episodes``.
         FileExistsError: the record exists and not ``overwrite``.
     """
-    check_validation_starts(episodes, seed, test_seed, "a seed")
+    validation = _validation_sets(episodes, seed, test_seed)
     if test_episodes is not None and test_episodes <= 0:
         raise ValueError(f"test_episodes must be positive, got {test_episodes}")
     if target is not None and test_episodes is None:
@@ -471,26 +501,15 @@ def select_seed(
     _check_one_recipe(runs)
     task = task if task is not None else runs[0].config["task"]
     name = name or study_name(folders)
+    # One set keeps the plain numbers; pooled sets list theirs (and name them all).
+    counts, seeds = (list(values) for values in zip(*validation, strict=True))
+    episodes, seed = (values[0] if len(values) == 1 else values for values in (counts, seeds))
     record = seed_selection_name(name, episodes, seed)
     new_result_path(record, overwrite)
     mode = runs[0].config.get("residual_mode", "full")
     composition = runs[0].config.get("composition", "residual")
 
-    rows = []
-    for run in runs:
-        evaluation, result = _run_evaluation(
-            run, task, mode, composition, episodes, seed, workers, required=("peak_force_n",)
-        )
-        rows.append(
-            {
-                "seed": run.seed,
-                "folder": str(run.folder),
-                "evaluation": evaluation,
-                "success_rate": result["success_rate"],
-                "peak_force_n": result["peak_force_n"],
-                "peak_low_passed_force_n": result.get("peak_low_passed_force_n"),
-            }
-        )
+    rows = [_pooled_validation(run, task, mode, composition, validation, workers) for run in runs]
     chosen = choose_seed(rows)
     data = {
         "name": name,
@@ -514,9 +533,46 @@ def select_seed(
             )
             row["test_success_rate"] = result["success_rate"]
         data["test"] = _judged_on_test(rows, test_task, test_episodes, target)
-    write_result(record, data, seed=seed)
+    write_result(record, data, seed=seed if isinstance(seed, int) else None)
     (results_dir() / f"{record}.md").write_text(seed_selection_markdown(data))
     return data
+
+
+def _pooled_validation(
+    run: SeedRun,
+    task: str,
+    mode: str,
+    composition: str,
+    validation: list[tuple[int, int]],
+    workers: int,
+) -> dict:
+    """The run's row of a seed selection: its success and mean peaks on the validation
+    starts, each set weighted by its number of starts."""
+    names, results = [], []
+    for count, seed in validation:
+        name, result = _run_evaluation(
+            run, task, mode, composition, count, seed, workers, required=("peak_force_n",)
+        )
+        names.append(name)
+        results.append(result)
+    total = sum(count for count, _ in validation)
+
+    def pooled(key: str) -> float | None:
+        values = [result.get(key) for result in results]
+        if any(value is None for value in values):
+            return None
+        weighted = (count * value for (count, _), value in zip(validation, values, strict=True))
+        return sum(weighted) / total
+
+    return {
+        "seed": run.seed,
+        "folder": str(run.folder),
+        "evaluation": " + ".join(names),
+        "evaluations": names,
+        "success_rate": pooled("success_rate"),
+        "peak_force_n": pooled("peak_force_n"),
+        "peak_low_passed_force_n": pooled("peak_low_passed_force_n"),
+    }
 
 
 def _judged_on_test(rows: list[dict], task: str, episodes: int, target: float | None) -> dict:
@@ -541,8 +597,9 @@ def seed_selection_markdown(data: dict) -> str:
     lines = [
         f"# Seed selection: {data['name']}",
         "",
-        f"Each seed's final policy on {data['validation_episodes']} validation starts of "
-        f"`{data['task']}` (evaluation seed {data['validation_seed']}; the test seed "
+        f"Each seed's final policy on {_joined(data['validation_episodes'])} validation "
+        f"starts of `{data['task']}` (evaluation seed {_joined(data['validation_seed'])}; "
+        f"the test seed "
         f"{data['test_seed']} is not used), mean action. Rule: {data['rule']}. Chosen: "
         f"seed {data['chosen_seed']}, `{data['chosen_policy']}`. Its test result is the "
         "chosen policy's, not the recipe's mean over seeds.",

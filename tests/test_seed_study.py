@@ -377,3 +377,41 @@ def test_select_judges_its_rule_on_the_test_starts_when_asked(tmp_path, monkeypa
         select_seed(folders, seed=1, test_episodes=0, name="other")
     assert main(["select", "--run", folders[0], "--test-episodes", "200"]) == 2
     assert "--test-episodes judges a selection among seeds" in capsys.readouterr().err
+
+
+def test_select_pools_the_validation_starts_of_several_seeds(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(evaluate_module, "evaluate", _never_evaluate)
+    # On seed 1's 100 starts seed 1 leads (99 against 98 %); 200 more of seed 4 turn it:
+    # pooled, seed 0 (98 + 2 * 99.5) / 3 = 99.0 % against seed 1's (99 + 2 * 97) / 3 = 97.7 %.
+    folders = _seeds_validated(tmp_path, {0: (0.98, 110.0), 1: (0.99, 140.0)})
+    for folder, (rate, peak) in zip(folders, [(0.995, 116.0), (0.97, 120.0)], strict=True):
+        _store_evaluation(
+            Path(folder), "peg_easy", False, rate, episodes=200, counted=True, seed=4,
+            peak_force_n=peak, peak_low_passed_force_n=peak / 2,
+        )  # fmt: skip
+    args = ["select", "--runs", *folders, "--seed", "1", "4", "--episodes", "100", "200"]
+    assert main(args) == 0
+    assert "seed   0: 99.0 %, peak 114 N  <- chosen" in capsys.readouterr().out
+    stem = tmp_path / "results" / "select_seeds_recipe_n100+200_s1+4"
+    data = json.loads(stem.with_suffix(".json").read_text())["data"]
+    assert (data["validation_seed"], data["validation_episodes"]) == ([1, 4], [100, 200])
+    row = data["candidates"][0]
+    assert row["success_rate"] == pytest.approx(0.99)
+    assert row["peak_force_n"] == pytest.approx((110.0 + 2 * 116.0) / 3)
+    assert row["peak_low_passed_force_n"] == pytest.approx((55.0 + 2 * 58.0) / 3)
+    assert len(row["evaluations"]) == 2
+    markdown = stem.with_suffix(".md").read_text()
+    assert "on 100+200 validation starts of `peg_easy` (evaluation seed 1+4;" in markdown
+    # One seed's starts alone still choose seed 1; one count serves every seed.
+    assert select_seed(folders, seed=1, name="one")["chosen_seed"] == 1
+    with pytest.raises(ValueError, match="no stored results/.*_n200_s1.json"):
+        select_seed(folders, seed=[1, 4], episodes=200, name="other")
+    with pytest.raises(ValueError, match=r"one count or one per validation seed \(2\)"):
+        select_seed(folders, seed=[1, 4], episodes=[100, 200, 300], name="other")
+    with pytest.raises(ValueError, match="each validation seed once"):
+        select_seed(folders, seed=[1, 1], name="other")
+    with pytest.raises(ValueError, match="must differ from the test seed"):
+        select_seed(folders, seed=[1, 0], name="other")
+    assert main(["select", "--run", folders[0], "--seed", "1", "4"]) == 2
+    assert "take one value when choosing a checkpoint" in capsys.readouterr().err
