@@ -484,8 +484,8 @@ def select_seed(
         ValueError: a validation ``seed`` equals ``test_seed`` or is given twice,
             ``episodes`` neither one count nor one per seed, fewer than two runs, runs of different
             recipes, a run with neither a policy nor a stored evaluation, a
-            ``test_episodes`` that is not positive, or a ``target`` outside [0, 100] or
-            without ``test_episodes``.
+            ``test_episodes`` that is not positive, or a ``target`` outside [0, 100], or a
+            ``target`` or ``test_task`` without ``test_episodes``.
         FileExistsError: the record exists and not ``overwrite``.
     """
     validation = _validation_sets(episodes, seed, test_seed)
@@ -493,6 +493,8 @@ def select_seed(
         raise ValueError(f"test_episodes must be positive, got {test_episodes}")
     if target is not None and test_episodes is None:
         raise ValueError(f"target: {target} % is judged on test starts; give test_episodes")
+    if test_task is not None and test_episodes is None:
+        raise ValueError(f"test_task: {test_task!r} is tested only with test_episodes; give it")
     if target is not None and not 0 <= target <= 100:
         raise ValueError(f"target must be a success % in [0, 100], got {target}")
     if len(folders) < 2:

@@ -371,6 +371,8 @@ def test_select_judges_its_rule_on_the_test_starts_when_asked(tmp_path, monkeypa
     # test options with --run (a choice among checkpoints).
     with pytest.raises(ValueError, match="give test_episodes"):
         select_seed(folders, seed=1, target=98.0, name="other")
+    with pytest.raises(ValueError, match="test_task: 'peg_hard' is tested only with"):
+        select_seed(folders, seed=1, test_task="peg_hard", name="other")
     with pytest.raises(ValueError, match="target must be a success % in"):
         select_seed(folders, seed=1, test_episodes=200, target=0.98e3, name="other")
     with pytest.raises(ValueError, match="test_episodes must be positive, got 0"):
