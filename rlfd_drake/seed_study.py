@@ -482,9 +482,9 @@ def select_seed(
 
     Raises:
         ValueError: a validation ``seed`` equals ``test_seed`` or is given twice,
-            ``episodes`` neither one count nor one per seed, fewer than two runs, runs of different
-            recipes, a run with neither a policy nor a stored evaluation, a
-            ``test_episodes`` that is not positive, or a ``target`` outside [0, 100], or a
+            ``episodes`` neither one count nor one per seed, fewer than two runs, runs of
+            different recipes, a run with neither a policy nor a stored evaluation, a
+            ``test_episodes`` that is not positive, a ``target`` outside [0, 100], or a
             ``target`` or ``test_task`` without ``test_episodes``.
         FileExistsError: the record exists and not ``overwrite``.
     """
@@ -503,9 +503,10 @@ def select_seed(
     _check_one_recipe(runs)
     task = task if task is not None else runs[0].config["task"]
     name = name or study_name(folders)
-    # One set keeps the plain numbers; pooled sets list theirs (and name them all).
-    counts, seeds = (list(values) for values in zip(*validation, strict=True))
-    episodes, seed = (values[0] if len(values) == 1 else values for values in (counts, seeds))
+    counts = [count for count, _ in validation]
+    seeds = [validation_seed for _, validation_seed in validation]
+    # One set keeps the plain numbers (and its record's name); pooled sets list theirs.
+    episodes, seed = (counts[0], seeds[0]) if len(validation) == 1 else (counts, seeds)
     record = seed_selection_name(name, episodes, seed)
     new_result_path(record, overwrite)
     mode = runs[0].config.get("residual_mode", "full")
@@ -601,10 +602,9 @@ def seed_selection_markdown(data: dict) -> str:
         "",
         f"Each seed's final policy on {_joined(data['validation_episodes'])} validation "
         f"starts of `{data['task']}` (evaluation seed {_joined(data['validation_seed'])}; "
-        f"the test seed "
-        f"{data['test_seed']} is not used), mean action. Rule: {data['rule']}. Chosen: "
-        f"seed {data['chosen_seed']}, `{data['chosen_policy']}`. Its test result is the "
-        "chosen policy's, not the recipe's mean over seeds.",
+        f"the test seed {data['test_seed']} is not used), mean action. Rule: {data['rule']}. "
+        f"Chosen: seed {data['chosen_seed']}, `{data['chosen_policy']}`. Its test result is "
+        "the chosen policy's, not the recipe's mean over seeds.",
         "",
         "Training commands:",
         "",
