@@ -400,6 +400,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
+    # Only a given --ppo-n-steps reaches the config, so that SAC can refuse it.
+    ppo_rollout = {} if args.ppo_n_steps is None else {"ppo_n_steps": args.ppo_n_steps}
+    if ppo_rollout and args.algo != "ppo":
+        raise ValueError(f"ppo_n_steps={args.ppo_n_steps} needs algo 'ppo', got {args.algo!r}")
     config = TrainConfig(
         task=args.task,
         algo=args.algo,
@@ -418,6 +422,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         learning_rate_schedule=args.learning_rate_schedule,
         ppo_sde_sample_steps=args.ppo_sde_sample_steps,
         ppo_history=args.ppo_history,
+        **ppo_rollout,
         sac_learning_starts=args.sac_learning_starts,
         sac_initial_ent_coef=args.sac_initial_ent_coef,
         sac_gradient_steps=args.sac_gradient_steps,
@@ -931,6 +936,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["constant", "linear"],
         default="constant",
         help="linear: the step size falls to 0 over the run's episodes",
+    )
+    train.add_argument(
+        "--ppo-n-steps",
+        type=int,
+        default=None,
+        help="PPO: steps each env collects between updates (256, about 10 episodes "
+        "over 2 envs at the 10 Hz residual)",
     )
     train.add_argument(
         "--ppo-sde-sample-steps",

@@ -375,8 +375,8 @@ def test_bench_evaluate_names_runs_by_their_folder_and_stays_a_file_name():
 
 
 def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
-    """`rlfd train`'s exploration flags land in the TrainConfig it trains, and a bad
-    one is a named error (exit 2), not a crash."""
+    """`rlfd train`'s exploration and PPO rollout flags land in the TrainConfig it
+    trains, and a bad one is a named error (exit 2), not a crash."""
     import rlfd_drake.train as train_module
 
     seen = {}
@@ -392,6 +392,13 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     assert main([*flags, "--ppo-sde-sample-steps", "-3", "--out", "unused"]) == 2
     assert "ppo_sde_sample_steps must be an integer >= 0, got -3" in capsys.readouterr().err
     assert main([*flags, "--ppo-history", "4", "--out", "unused"]) == 0
-    assert seen["c"].ppo_history == 4
+    assert seen["c"].ppo_history == 4 and seen["c"].ppo_n_steps == 256
+    assert main([*flags, "--ppo-n-steps", "512", "--out", "unused"]) == 0
+    assert seen["c"].ppo_n_steps == 512
+    assert main([*flags, "--ppo-n-steps", "0", "--out", "unused"]) == 2
+    assert "ppo_n_steps must be >= 1, got 0" in capsys.readouterr().err
+    sac = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-n-steps", "512"]
+    assert main([*sac, "--out", "unused"]) == 2
+    assert "ppo_n_steps=512 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
     assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
     assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err
