@@ -400,10 +400,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
-    # Only a given --ppo-n-steps reaches the config, so that SAC can refuse it.
+    # Only a given --ppo-n-steps reaches the config: its default lives there.
     ppo_rollout = {} if args.ppo_n_steps is None else {"ppo_n_steps": args.ppo_n_steps}
-    if ppo_rollout and args.algo != "ppo":
-        raise ValueError(f"ppo_n_steps={args.ppo_n_steps} needs algo 'ppo', got {args.algo!r}")
     config = TrainConfig(
         task=args.task,
         algo=args.algo,
@@ -941,8 +939,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--ppo-n-steps",
         type=int,
         default=None,
-        help="PPO: steps each env collects between updates (256, about 10 episodes "
-        "over 2 envs at the 10 Hz residual)",
+        help="PPO and recurrent PPO: steps each env collects between updates (256, "
+        "about 10 episodes over 2 envs at the 10 Hz residual)",
     )
     train.add_argument(
         "--ppo-sde-sample-steps",

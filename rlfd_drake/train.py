@@ -74,6 +74,8 @@ ALGORITHMS = ("ppo", "sac", "recurrent_ppo")
 # Every algorithm's discount factor; the distance shaping must use the same one.
 DISCOUNT = 0.99
 LEARNING_RATE_SCHEDULES = ("constant", "linear")
+#: PPO's and recurrent PPO's rollout steps per env between updates, unless a run sets them.
+PPO_N_STEPS = 256
 
 
 @dataclass
@@ -246,7 +248,7 @@ class TrainConfig:
     log_std_init: float = -1.5
     learning_rate: float = 3e-4
     learning_rate_schedule: str = "constant"
-    ppo_n_steps: int = 256
+    ppo_n_steps: int = PPO_N_STEPS
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
@@ -309,6 +311,11 @@ class TrainConfig:
             raise ValueError(
                 f"ppo_sde_sample_steps={self.ppo_sde_sample_steps} needs algo 'ppo', got "
                 f"{self.algo!r}"
+            )
+        if self.algo == "sac" and self.ppo_n_steps != PPO_N_STEPS:  # SAC does not roll out
+            raise ValueError(
+                f"ppo_n_steps={self.ppo_n_steps} needs algo 'ppo', got {self.algo!r} "
+                "('recurrent_ppo' also takes it)"
             )
         if self.ppo_history > 1:
             self._check_ppo_history()

@@ -400,5 +400,8 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     sac = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-n-steps", "512"]
     assert main([*sac, "--out", "unused"]) == 2
     assert "ppo_n_steps=512 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
+    recurrent = ["train", "--task", "peg_easy", "--algo", "recurrent_ppo", "--ppo-n-steps", "128"]
+    assert main([*recurrent, "--out", "unused"]) == 0
+    assert seen["c"].ppo_n_steps == 128
     assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
     assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err
