@@ -400,8 +400,15 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
-    # Only a given --ppo-n-steps reaches the config: its default lives there.
-    ppo_rollout = {} if args.ppo_n_steps is None else {"ppo_n_steps": args.ppo_n_steps}
+    # Only a given --ppo-n-steps / --ppo-gae-lambda reaches the config: defaults live there.
+    ppo_rollout = {
+        key: value
+        for key, value in (
+            ("ppo_n_steps", args.ppo_n_steps),
+            ("ppo_gae_lambda", args.ppo_gae_lambda),
+        )
+        if value is not None
+    }
     config = TrainConfig(
         task=args.task,
         algo=args.algo,
@@ -941,6 +948,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="PPO and recurrent PPO: steps each env collects between updates (256, "
         "about 10 episodes over 2 envs at the 10 Hz residual)",
+    )
+    train.add_argument(
+        "--ppo-gae-lambda",
+        type=float,
+        default=None,
+        help="PPO and recurrent PPO: GAE lambda in (0, 1] (0.95, SB3's default; 1 = "
+        "Monte Carlo returns)",
     )
     train.add_argument(
         "--ppo-sde-sample-steps",

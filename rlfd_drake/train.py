@@ -76,6 +76,8 @@ DISCOUNT = 0.99
 LEARNING_RATE_SCHEDULES = ("constant", "linear")
 #: PPO's and recurrent PPO's rollout steps per env between updates, unless a run sets them.
 PPO_N_STEPS = 256
+#: PPO's and recurrent PPO's GAE lambda (SB3's default), unless a run sets it.
+PPO_GAE_LAMBDA = 0.95
 
 
 @dataclass
@@ -134,6 +136,9 @@ class TrainConfig:
             that is saved (PPO's last iterate lost up to 8 points of training success
             at the end of the peg runs with a constant step).
         ppo_n_steps: PPO rollout length per env between updates.
+        ppo_gae_lambda: PPO's generalised advantage estimation lambda, in (0, 1]:
+            how many steps of real returns an advantage weighs before it leans on the
+            critic (about 1 / (1 - gamma * lambda) steps; 1 = Monte Carlo returns).
         ppo_history: PPO only: the last N observations stacked as its input
             (``VecFrameStack``, newest last), a memory of the contact the policy has
             felt, as ``history`` is SAC's; 1 = the current observation alone (the
@@ -249,6 +254,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     learning_rate_schedule: str = "constant"
     ppo_n_steps: int = PPO_N_STEPS
+    ppo_gae_lambda: float = PPO_GAE_LAMBDA
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
@@ -315,6 +321,13 @@ class TrainConfig:
         if self.algo == "sac" and self.ppo_n_steps != PPO_N_STEPS:  # SAC does not roll out
             raise ValueError(
                 f"ppo_n_steps={self.ppo_n_steps} needs algo 'ppo', got {self.algo!r} "
+                "('recurrent_ppo' also takes it)"
+            )
+        if not (np.isfinite(self.ppo_gae_lambda) and 0.0 < self.ppo_gae_lambda <= 1.0):
+            raise ValueError(f"ppo_gae_lambda must be in (0, 1], got {self.ppo_gae_lambda}")
+        if self.algo == "sac" and self.ppo_gae_lambda != PPO_GAE_LAMBDA:
+            raise ValueError(
+                f"ppo_gae_lambda={self.ppo_gae_lambda} needs algo 'ppo', got {self.algo!r} "
                 "('recurrent_ppo' also takes it)"
             )
         if self.ppo_history > 1:
@@ -618,6 +631,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             policy,
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
+            gae_lambda=config.ppo_gae_lambda,
             n_epochs=10,
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
@@ -662,6 +676,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             "MlpLstmPolicy",
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
+            gae_lambda=config.ppo_gae_lambda,
             gamma=DISCOUNT,
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
             **common,

@@ -403,5 +403,15 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     recurrent = ["train", "--task", "peg_easy", "--algo", "recurrent_ppo", "--ppo-n-steps", "128"]
     assert main([*recurrent, "--out", "unused"]) == 0
     assert seen["c"].ppo_n_steps == 128
+    assert seen["c"].ppo_gae_lambda == 0.95  # SB3's default unless given
+    assert main([*flags, "--ppo-gae-lambda", "0.99", "--out", "unused"]) == 0
+    assert seen["c"].ppo_gae_lambda == 0.99
+    assert main([*recurrent, "--ppo-gae-lambda", "1", "--out", "unused"]) == 0
+    assert seen["c"].ppo_gae_lambda == 1.0
+    assert main([*flags, "--ppo-gae-lambda", "1.5", "--out", "unused"]) == 2
+    assert "ppo_gae_lambda must be in (0, 1], got 1.5" in capsys.readouterr().err
+    sac_lambda = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-gae-lambda", "0.99"]
+    assert main([*sac_lambda, "--out", "unused"]) == 2
+    assert "ppo_gae_lambda=0.99 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
     assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
     assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err

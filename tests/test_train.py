@@ -61,6 +61,28 @@ def test_ppo_two_updates_change_the_policy():
     assert _changed(before, model)
 
 
+def _monte_carlo_gap(model) -> float:
+    """Largest gap from R_t = r_t + gamma R_(t+1) (within an episode) in the last rollout:
+    the recursion GAE's returns obey at lambda = 1 and not below it (they mix in V)."""
+    buffer = model.rollout_buffer
+    returns, rewards = buffer.returns[:, 0], buffer.rewards[:, 0]
+    continues = 1.0 - buffer.episode_starts[1:, 0]
+    expected = rewards[:-1] + model.gamma * continues * returns[1:]
+    return float(np.max(np.abs(returns[:-1] - expected)))
+
+
+def test_ppo_gae_lambda_reaches_the_advantages():
+    gaps = {}
+    for gae_lambda in (1.0, 0.5):
+        config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, ppo_gae_lambda=gae_lambda)
+        model = make_model(config, fast_venv(), None)
+        assert model.gae_lambda == gae_lambda
+        model.learn(total_timesteps=16)
+        gaps[gae_lambda] = _monte_carlo_gap(model)
+    assert gaps[1.0] < 1e-5
+    assert gaps[0.5] > 1e-3  # the untrained critic's values are not zero
+
+
 def test_sac_updates_change_the_policy():
     config = TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=8)
     model = make_model(config, fast_venv(), None)
