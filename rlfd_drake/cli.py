@@ -946,8 +946,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--ppo-n-steps",
         type=int,
         default=None,
-        help="PPO and recurrent PPO: steps each env collects between updates (256, "
-        "about 10 episodes over 2 envs at the 10 Hz residual)",
+        help="PPO and recurrent PPO: steps each env collects between updates (256: "
+        "about 18 peg episodes over 2 envs at the 10 Hz residual)",
     )
     train.add_argument(
         "--ppo-gae-lambda",
