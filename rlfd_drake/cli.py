@@ -423,6 +423,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         checkpoint_every_episodes=args.checkpoint_every,
         sac_target_entropy=args.sac_target_entropy,
         log_std_init=args.log_std_init,
+        log_std_final=args.log_std_final,
         learning_rate=args.learning_rate,
         learning_rate_schedule=args.learning_rate_schedule,
         ppo_sde_sample_steps=args.ppo_sde_sample_steps,
@@ -1010,6 +1011,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=-1.5,
         help="initial log std of the policy's Gaussian (-1.5: a std of 0.22 of the "
         "residual's range; RJ-45's 30 N limit needs smaller, e.g. -3)",
+    )
+    train.add_argument(
+        "--log-std-final",
+        type=float,
+        default=None,
+        help="PPO and recurrent PPO: the log std is not learned but falls linearly over "
+        "the run's episodes from --log-std-init to this",
     )
     train.add_argument(
         "--composition",

@@ -104,6 +104,34 @@ class LinearDecayOverEpisodes:
         return float(self.initial * min(1.0, max(0.0, remaining)))
 
 
+class ExplorationNoiseSchedule(BaseCallback):
+    """Holds a PPO policy's log std at ``initial + (final - initial) * done / total``
+    (finished episodes, floored and capped) instead of learning it: set before every
+    rollout, so a rollout and the update that learns from it share one value."""
+
+    def __init__(self, initial: float, final: float, progress: EpisodeProgress):
+        super().__init__()
+        self.initial = initial
+        self.final = final
+        self.progress = progress
+
+    def value(self) -> float:
+        fraction = min(1.0, max(0.0, self.progress.done / max(1, self.progress.total)))
+        return float(self.initial + (self.final - self.initial) * fraction)
+
+    def _init_callback(self) -> None:
+        # Out of the optimiser's reach: no gradient, so Adam leaves it alone.
+        self.model.policy.log_std.requires_grad_(False)
+        self._on_rollout_start()
+
+    def _on_rollout_start(self) -> None:
+        with torch.no_grad():
+            self.model.policy.log_std.fill_(self.value())
+
+    def _on_step(self) -> bool:
+        return True
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """One training run.
@@ -128,6 +156,12 @@ class TrainConfig:
         log_std_init: initial log std of the policy's Gaussian (exploration size; for
             SAC before its tanh squashing): small, so early exploration is a gentle
             jiggle around the DMP rather than uniform noise over the residual's range.
+        log_std_final: PPO and recurrent PPO only: None (default) = the log std is a
+            learned parameter, as in SB3; a number = it is no longer learned but falls
+            linearly over the run's finished episodes from ``log_std_init`` to this,
+            so the noise the last updates train under is closer to the mean action the
+            policy is evaluated with (the peg policies' own log std barely moved from
+            -2, and their sampled actions insert far fewer starts than their mean).
         learning_rate: optimiser step size.
         learning_rate_schedule: "constant" (SB3's default), or "linear": the step
             size falls linearly from ``learning_rate`` to 0 over the run's own
@@ -251,6 +285,7 @@ class TrainConfig:
     eval_episodes: int = 10
     checkpoint_every_episodes: int = 100
     log_std_init: float = -1.5
+    log_std_final: float | None = None
     learning_rate: float = 3e-4
     learning_rate_schedule: str = "constant"
     ppo_n_steps: int = PPO_N_STEPS
@@ -356,6 +391,8 @@ class TrainConfig:
             )
         if not np.isfinite(self.log_std_init):
             raise ValueError(f"log_std_init must be finite, got {self.log_std_init}")
+        if self.log_std_final is not None:
+            self._check_log_std_final()
         if self.composition not in COMPOSITIONS:
             raise ValueError(f"composition must be one of {COMPOSITIONS}, got {self.composition!r}")
         if self.init_from is not None and not policy_file(self.init_from).is_file():
@@ -413,6 +450,20 @@ class TrainConfig:
             DISCOUNT,
             self.distance_shaping_axes,
         )
+
+    def _check_log_std_final(self) -> None:
+        if not np.isfinite(self.log_std_final):
+            raise ValueError(f"log_std_final must be finite, got {self.log_std_final}")
+        if self.algo == "sac":  # SAC's log std is a layer of the actor, not a parameter
+            raise ValueError(
+                f"log_std_final={self.log_std_final} needs algo 'ppo' or 'recurrent_ppo', "
+                f"got {self.algo!r}"
+            )
+        if self.ppo_sde_sample_steps:
+            raise ValueError(
+                f"log_std_final={self.log_std_final} cannot schedule gSDE's noise "
+                f"(ppo_sde_sample_steps={self.ppo_sde_sample_steps}): give one or the other"
+            )
 
     def _check_ppo_history(self) -> None:
         """ValueError naming the setting that PPO's stacked history cannot go with."""
@@ -938,6 +989,10 @@ def train(
             episodes_done,
         ),
     ]
+    if config.log_std_final is not None:
+        callbacks.append(
+            ExplorationNoiseSchedule(config.log_std_init, config.log_std_final, progress)
+        )
     if config.eval_every_episodes > 0:
         eval_env = make_envs(config, 1, config.seed + 10_000)
         callbacks.append(

@@ -413,5 +413,15 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     sac_lambda = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-gae-lambda", "0.99"]
     assert main([*sac_lambda, "--out", "unused"]) == 2
     assert "ppo_gae_lambda=0.99 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
+    assert main([*flags, "--log-std-final", "-3", "--out", "unused"]) == 0
+    assert seen["c"].log_std_final == -3.0 and seen["c"].log_std_init == -4.0
+    sac_final = ["train", "--task", "peg_easy", "--algo", "sac", "--log-std-final", "-3"]
+    assert main([*sac_final, "--out", "unused"]) == 2
+    assert "log_std_final=-3.0 needs algo 'ppo' or 'recurrent_ppo', got 'sac'" in (
+        capsys.readouterr().err
+    )
+    sde = [*flags, "--ppo-sde-sample-steps", "20", "--log-std-final", "-3"]
+    assert main([*sde, "--out", "unused"]) == 2
+    assert "cannot schedule gSDE's noise (ppo_sde_sample_steps=20)" in capsys.readouterr().err
     assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
     assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -20,6 +20,7 @@ from rlfd_drake.env import SHAPING_AXES, RlfdEnv
 from rlfd_drake.train import (
     EpisodeProgress,
     EveryNEpisodes,
+    ExplorationNoiseSchedule,
     LinearDecayOverEpisodes,
     TrainConfig,
     load_model,
@@ -81,6 +82,33 @@ def test_ppo_gae_lambda_reaches_the_advantages():
         gaps[gae_lambda] = _monte_carlo_gap(model)
     assert gaps[1.0] < 1e-5
     assert gaps[0.5] > 1e-3  # the untrained critic's values are not zero
+
+
+def test_exploration_noise_schedule_holds_the_log_std_through_updates():
+    """The scheduled log std is what every rollout samples with, the optimiser leaves it
+    alone, and it reaches the final value when the episodes run out."""
+    config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, log_std_init=-2.0)
+    model = make_model(config, fast_venv(), None)
+    progress = EpisodeProgress(done=5, total=20)
+    schedule = ExplorationNoiseSchedule(-2.0, -3.0, progress)
+    seen = []
+
+    class Record(BaseCallback):
+        def _on_rollout_start(self):
+            seen.append(self.model.policy.log_std.detach().clone())
+
+        def _on_step(self):
+            return True
+
+    before = _parameters(model)
+    model.learn(total_timesteps=32, callback=CallbackList([schedule, Record()]))
+    assert model._n_updates == 2 * model.n_epochs and _changed(before, model)
+    assert not model.policy.log_std.requires_grad
+    assert len(seen) == 2 and all(torch.allclose(v, torch.tensor(-2.25)) for v in seen)
+    assert torch.allclose(model.policy.log_std, torch.tensor(-2.25))  # not moved by the updates
+    progress.done = 30  # past the budget: held at the final value
+    schedule.on_rollout_start()
+    assert torch.allclose(model.policy.log_std, torch.tensor(-3.0))
 
 
 def test_sac_updates_change_the_policy():
