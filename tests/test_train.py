@@ -931,3 +931,15 @@ def test_curriculum_grows_the_start_perturbation_over_the_first_half_of_training
         return
     assert [name for name, _ in told] == ["set_perturbation_scale"] * 4
     assert [value for _, value in told] == pytest.approx([0.2, 0.52, 1.0, 1.0])
+
+
+def test_a_run_with_a_falling_noise_saves_a_policy_with_less_noise(tmp_path):
+    """`train` wires the schedule in: the saved log std is below where it started, where
+    a learned one (no schedule) was moved only by the optimiser's small steps."""
+    config = TrainConfig(
+        algo="ppo", episodes=2, envs=1, ppo_n_steps=8, log_std_init=-2.0, log_std_final=-4.0
+    )
+    train(config, tmp_path / "run", progress_bar=False)
+    log_std = load_model(tmp_path / "run" / "policy.zip").policy.log_std
+    # Rollouts after the first episode sample at -3 (half the run) or lower.
+    assert torch.all(log_std <= -3.0 + 1e-6) and torch.all(log_std >= -4.0 - 1e-6)
