@@ -400,12 +400,14 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
-    # Only a given --ppo-n-steps / --ppo-gae-lambda reaches the config: defaults live there.
+    # Only a given --ppo-n-steps / --ppo-gae-lambda / --ppo-epochs reaches the config, whose
+    # defaults they are.
     ppo_rollout = {
         key: value
         for key, value in (
             ("ppo_n_steps", args.ppo_n_steps),
             ("ppo_gae_lambda", args.ppo_gae_lambda),
+            ("ppo_epochs", args.ppo_epochs),
         )
         if value is not None
     }
@@ -949,6 +951,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="PPO and recurrent PPO: steps each env collects between updates (256: "
         "about 18 peg episodes over 2 envs at the 10 Hz residual)",
+    )
+    train.add_argument(
+        "--ppo-epochs",
+        type=int,
+        default=None,
+        help="PPO and recurrent PPO: passes over each rollout per update (10, SB3's default)",
     )
     train.add_argument(
         "--ppo-gae-lambda",

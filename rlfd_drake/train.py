@@ -78,6 +78,8 @@ LEARNING_RATE_SCHEDULES = ("constant", "linear")
 PPO_N_STEPS = 256
 #: PPO's and recurrent PPO's GAE lambda (SB3's default), unless a run sets it.
 PPO_GAE_LAMBDA = 0.95
+#: PPO's and recurrent PPO's passes over each rollout (SB3's default), unless a run sets them.
+PPO_EPOCHS = 10
 
 
 @dataclass
@@ -173,6 +175,7 @@ class TrainConfig:
         ppo_gae_lambda: PPO's generalised advantage estimation lambda, in (0, 1]:
             how many steps of real returns an advantage weighs before it leans on the
             critic (about 1 / (1 - gamma * lambda) steps; 1 = Monte Carlo returns).
+        ppo_epochs: PPO's passes over each rollout's data per update (minibatches of 64).
         ppo_history: PPO only: the last N observations stacked as its input
             (``VecFrameStack``, newest last), a memory of the contact the policy has
             felt, as ``history`` is SAC's; 1 = the current observation alone (the
@@ -290,6 +293,7 @@ class TrainConfig:
     learning_rate_schedule: str = "constant"
     ppo_n_steps: int = PPO_N_STEPS
     ppo_gae_lambda: float = PPO_GAE_LAMBDA
+    ppo_epochs: int = PPO_EPOCHS
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
@@ -335,6 +339,7 @@ class TrainConfig:
             "eval_episodes",
             "checkpoint_every_episodes",
             "ppo_n_steps",
+            "ppo_epochs",
             "ppo_history",
             "sac_gradient_steps",
             "imitation_episodes",
@@ -353,18 +358,18 @@ class TrainConfig:
                 f"ppo_sde_sample_steps={self.ppo_sde_sample_steps} needs algo 'ppo', got "
                 f"{self.algo!r}"
             )
-        if self.algo == "sac" and self.ppo_n_steps != PPO_N_STEPS:  # SAC does not roll out
-            raise ValueError(
-                f"ppo_n_steps={self.ppo_n_steps} needs algo 'ppo', got {self.algo!r} "
-                "('recurrent_ppo' also takes it)"
-            )
         if not (np.isfinite(self.ppo_gae_lambda) and 0.0 < self.ppo_gae_lambda <= 1.0):
             raise ValueError(f"ppo_gae_lambda must be in (0, 1], got {self.ppo_gae_lambda}")
-        if self.algo == "sac" and self.ppo_gae_lambda != PPO_GAE_LAMBDA:
-            raise ValueError(
-                f"ppo_gae_lambda={self.ppo_gae_lambda} needs algo 'ppo', got {self.algo!r} "
-                "('recurrent_ppo' also takes it)"
-            )
+        for name, default in (
+            ("ppo_n_steps", PPO_N_STEPS),
+            ("ppo_gae_lambda", PPO_GAE_LAMBDA),
+            ("ppo_epochs", PPO_EPOCHS),
+        ):
+            if self.algo == "sac" and getattr(self, name) != default:  # SAC does not roll out
+                raise ValueError(
+                    f"{name}={getattr(self, name)} needs algo 'ppo', got {self.algo!r} "
+                    "('recurrent_ppo' also takes it)"
+                )
         if self.ppo_history > 1:
             self._check_ppo_history()
         if self.sac_learning_starts < 0:
@@ -683,7 +688,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             gae_lambda=config.ppo_gae_lambda,
-            n_epochs=10,
+            n_epochs=config.ppo_epochs,
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
             gamma=DISCOUNT,
@@ -728,6 +733,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             n_steps=config.ppo_n_steps,
             batch_size=min(64, config.ppo_n_steps * config.envs),
             gae_lambda=config.ppo_gae_lambda,
+            n_epochs=config.ppo_epochs,
             gamma=DISCOUNT,
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
             **common,

@@ -413,6 +413,14 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     sac_lambda = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-gae-lambda", "0.99"]
     assert main([*sac_lambda, "--out", "unused"]) == 2
     assert "ppo_gae_lambda=0.99 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
+    assert seen["c"].ppo_epochs == 10
+    assert main([*flags, "--ppo-epochs", "5", "--out", "unused"]) == 0
+    assert seen["c"].ppo_epochs == 5
+    assert main([*flags, "--ppo-epochs", "0", "--out", "unused"]) == 2
+    assert "ppo_epochs must be >= 1, got 0" in capsys.readouterr().err
+    sac_epochs = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-epochs", "5"]
+    assert main([*sac_epochs, "--out", "unused"]) == 2
+    assert "ppo_epochs=5 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
     assert main([*flags, "--log-std-final", "-3", "--out", "unused"]) == 0
     assert seen["c"].log_std_final == -3.0 and seen["c"].log_std_init == -4.0
     sac_final = ["train", "--task", "peg_easy", "--algo", "sac", "--log-std-final", "-3"]

@@ -54,12 +54,13 @@ def test_untrained_residual_is_zero():
 
 
 def test_ppo_two_updates_change_the_policy():
-    config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16)
-    model = make_model(config, fast_venv(), None)
-    before = _parameters(model)
-    model.learn(total_timesteps=32)  # two rollouts of 16 steps -> two updates
-    assert model._n_updates == 2 * model.n_epochs
-    assert _changed(before, model)
+    for epochs in (10, 3):
+        config = TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, ppo_epochs=epochs)
+        model = make_model(config, fast_venv(), None)
+        before = _parameters(model)
+        model.learn(total_timesteps=32)  # two rollouts of 16 steps -> two updates
+        assert model._n_updates == 2 * epochs  # SB3 counts passes
+        assert _changed(before, model)
 
 
 def _monte_carlo_gap(model) -> float:
