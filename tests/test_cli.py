@@ -386,50 +386,50 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         return {}
 
     monkeypatch.setattr(train_module, "train", record)
-    flags = ["train", "--task", "peg_easy", "--algo", "ppo", "--log-std-init", "-4"]
-    assert main([*flags, "--ppo-sde-sample-steps", "20", "--out", "unused"]) == 0
-    assert seen["c"].ppo_sde_sample_steps == 20 and seen["c"].log_std_init == -4.0
-    assert main([*flags, "--ppo-sde-sample-steps", "-3", "--out", "unused"]) == 2
-    assert "ppo_sde_sample_steps must be an integer >= 0, got -3" in capsys.readouterr().err
-    assert main([*flags, "--ppo-history", "4", "--out", "unused"]) == 0
-    assert seen["c"].ppo_history == 4 and seen["c"].ppo_n_steps == 256
-    assert main([*flags, "--ppo-n-steps", "512", "--out", "unused"]) == 0
-    assert seen["c"].ppo_n_steps == 512
-    assert main([*flags, "--ppo-n-steps", "0", "--out", "unused"]) == 2
-    assert "ppo_n_steps must be >= 1, got 0" in capsys.readouterr().err
-    sac = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-n-steps", "512"]
-    assert main([*sac, "--out", "unused"]) == 2
-    assert "ppo_n_steps=512 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
-    recurrent = ["train", "--task", "peg_easy", "--algo", "recurrent_ppo", "--ppo-n-steps", "128"]
-    assert main([*recurrent, "--out", "unused"]) == 0
-    assert seen["c"].ppo_n_steps == 128
-    assert seen["c"].ppo_gae_lambda == 0.95  # SB3's default unless given
-    assert main([*flags, "--ppo-gae-lambda", "0.99", "--out", "unused"]) == 0
-    assert seen["c"].ppo_gae_lambda == 0.99
-    assert main([*recurrent, "--ppo-gae-lambda", "1", "--out", "unused"]) == 0
-    assert seen["c"].ppo_gae_lambda == 1.0
-    assert main([*flags, "--ppo-gae-lambda", "1.5", "--out", "unused"]) == 2
-    assert "ppo_gae_lambda must be in (0, 1], got 1.5" in capsys.readouterr().err
-    sac_lambda = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-gae-lambda", "0.99"]
-    assert main([*sac_lambda, "--out", "unused"]) == 2
-    assert "ppo_gae_lambda=0.99 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
-    assert seen["c"].ppo_epochs == 10
-    assert main([*flags, "--ppo-epochs", "5", "--out", "unused"]) == 0
-    assert seen["c"].ppo_epochs == 5
-    assert main([*flags, "--ppo-epochs", "0", "--out", "unused"]) == 2
-    assert "ppo_epochs must be >= 1, got 0" in capsys.readouterr().err
-    sac_epochs = ["train", "--task", "peg_easy", "--algo", "sac", "--ppo-epochs", "5"]
-    assert main([*sac_epochs, "--out", "unused"]) == 2
-    assert "ppo_epochs=5 needs algo 'ppo', got 'sac'" in capsys.readouterr().err
-    assert main([*flags, "--log-std-final", "-3", "--out", "unused"]) == 0
-    assert seen["c"].log_std_final == -3.0 and seen["c"].log_std_init == -4.0
-    sac_final = ["train", "--task", "peg_easy", "--algo", "sac", "--log-std-final", "-3"]
-    assert main([*sac_final, "--out", "unused"]) == 2
-    assert "log_std_final=-3.0 needs algo 'ppo' or 'recurrent_ppo', got 'sac'" in (
-        capsys.readouterr().err
-    )
-    sde = [*flags, "--ppo-sde-sample-steps", "20", "--log-std-final", "-3"]
-    assert main([*sde, "--out", "unused"]) == 2
-    assert "cannot schedule gSDE's noise (ppo_sde_sample_steps=20)" in capsys.readouterr().err
-    assert main([*flags, "--ppo-history", "0", "--out", "unused"]) == 2
-    assert "ppo_history must be >= 1, got 0" in capsys.readouterr().err
+    ppo = ["train", "--task", "peg_easy", "--algo", "ppo", "--log-std-init", "-4"]
+    recurrent = ["train", "--task", "peg_easy", "--algo", "recurrent_ppo"]
+    sac = ["train", "--task", "peg_easy", "--algo", "sac"]
+    assert main([*ppo, "--out", "unused"]) == 0  # the defaults live in TrainConfig
+    defaults = seen["c"]
+    assert (defaults.ppo_n_steps, defaults.ppo_gae_lambda, defaults.ppo_epochs) == (256, 0.95, 10)
+    assert defaults.log_std_final is None and defaults.log_std_init == -4.0
+    accepted = [
+        (ppo, ["--ppo-sde-sample-steps", "20"], "ppo_sde_sample_steps", 20),
+        (ppo, ["--ppo-history", "4"], "ppo_history", 4),
+        (ppo, ["--ppo-n-steps", "512"], "ppo_n_steps", 512),
+        (recurrent, ["--ppo-n-steps", "128"], "ppo_n_steps", 128),
+        (ppo, ["--ppo-gae-lambda", "0.99"], "ppo_gae_lambda", 0.99),
+        (recurrent, ["--ppo-gae-lambda", "1"], "ppo_gae_lambda", 1.0),
+        (ppo, ["--ppo-epochs", "5"], "ppo_epochs", 5),
+        (ppo, ["--log-std-final", "-3"], "log_std_final", -3.0),
+    ]
+    for command, flags, field, value in accepted:
+        assert main([*command, *flags, "--out", "unused"]) == 0, flags
+        assert getattr(seen["c"], field) == value, flags
+    refused = [
+        (
+            ppo,
+            ["--ppo-sde-sample-steps", "-3"],
+            "ppo_sde_sample_steps must be an integer >= 0, got -3",
+        ),
+        (ppo, ["--ppo-n-steps", "0"], "ppo_n_steps must be >= 1, got 0"),
+        (sac, ["--ppo-n-steps", "512"], "ppo_n_steps=512 needs algo 'ppo', got 'sac'"),
+        (ppo, ["--ppo-gae-lambda", "1.5"], "ppo_gae_lambda must be in (0, 1], got 1.5"),
+        (sac, ["--ppo-gae-lambda", "0.99"], "ppo_gae_lambda=0.99 needs algo 'ppo', got 'sac'"),
+        (ppo, ["--ppo-epochs", "0"], "ppo_epochs must be >= 1, got 0"),
+        (sac, ["--ppo-epochs", "5"], "ppo_epochs=5 needs algo 'ppo', got 'sac'"),
+        (
+            sac,
+            ["--log-std-final", "-3"],
+            "log_std_final=-3.0 needs algo 'ppo' or 'recurrent_ppo', got 'sac'",
+        ),
+        (
+            ppo,
+            ["--ppo-sde-sample-steps", "20", "--log-std-final", "-3"],
+            "cannot schedule gSDE's noise (ppo_sde_sample_steps=20)",
+        ),
+        (ppo, ["--ppo-history", "0"], "ppo_history must be >= 1, got 0"),
+    ]
+    for command, flags, message in refused:
+        assert main([*command, *flags, "--out", "unused"]) == 2, flags
+        assert message in capsys.readouterr().err, flags
