@@ -89,6 +89,10 @@ class EpisodeProgress:
     done: int
     total: int
 
+    def fraction(self) -> float:
+        """``done / total`` within [0, 1] (the last rollout may run past the budget)."""
+        return min(1.0, max(0.0, self.done / max(1, self.total)))
+
 
 @dataclass(frozen=True)
 class LinearDecayOverEpisodes:
@@ -102,8 +106,7 @@ class LinearDecayOverEpisodes:
     progress: EpisodeProgress
 
     def __call__(self, _progress_remaining: float) -> float:
-        remaining = 1.0 - self.progress.done / max(1, self.progress.total)
-        return float(self.initial * min(1.0, max(0.0, remaining)))
+        return float(self.initial * (1.0 - self.progress.fraction()))
 
 
 class ExplorationNoiseSchedule(BaseCallback):
@@ -118,8 +121,7 @@ class ExplorationNoiseSchedule(BaseCallback):
         self.progress = progress
 
     def value(self) -> float:
-        fraction = min(1.0, max(0.0, self.progress.done / max(1, self.progress.total)))
-        return float(self.initial + (self.final - self.initial) * fraction)
+        return float(self.initial + (self.final - self.initial) * self.progress.fraction())
 
     def _init_callback(self) -> None:
         # Out of the optimiser's reach: no gradient, so Adam leaves it alone.
@@ -678,6 +680,14 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
         tensorboard_log=str(tensorboard_dir) if tensorboard_dir else None,
         device="cpu",
     )
+    # PPO's and recurrent PPO's rollout and update settings (SAC does not roll out).
+    rollout = dict(
+        n_steps=config.ppo_n_steps,
+        batch_size=min(64, config.ppo_n_steps * config.envs),
+        gae_lambda=config.ppo_gae_lambda,
+        n_epochs=config.ppo_epochs,
+        gamma=DISCOUNT,
+    )
     if config.algo == "ppo":
         policy, reading = "MlpPolicy", inputs
         if config.privileged_critic:  # its own two input layers, with these scales
@@ -685,14 +695,10 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             reading = dict(privileged_size=PRIVILEGED_SIZE, observation_scales=scales)
         model = PPO(
             policy,
-            n_steps=config.ppo_n_steps,
-            batch_size=min(64, config.ppo_n_steps * config.envs),
-            gae_lambda=config.ppo_gae_lambda,
-            n_epochs=config.ppo_epochs,
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
-            gamma=DISCOUNT,
             policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **reading),
+            **rollout,
             **common,
         )
     elif config.algo == "sac":
@@ -730,12 +736,8 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
 
         model = RecurrentPPO(
             "MlpLstmPolicy",
-            n_steps=config.ppo_n_steps,
-            batch_size=min(64, config.ppo_n_steps * config.envs),
-            gae_lambda=config.ppo_gae_lambda,
-            n_epochs=config.ppo_epochs,
-            gamma=DISCOUNT,
             policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
+            **rollout,
             **common,
         )
     zero_residual_output(model, config.log_std_init)
