@@ -400,14 +400,15 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
-    # Only a given --ppo-n-steps / --ppo-gae-lambda / --ppo-epochs reaches the config, whose
-    # defaults they are.
+    # Only a given --ppo-n-steps / --ppo-gae-lambda / --ppo-epochs / --ppo-hidden-layers
+    # reaches the config, whose defaults they are.
     ppo_rollout = {
         key: value
         for key, value in (
             ("ppo_n_steps", args.ppo_n_steps),
             ("ppo_gae_lambda", args.ppo_gae_lambda),
             ("ppo_epochs", args.ppo_epochs),
+            ("ppo_hidden_layers", args.ppo_hidden_layers),
         )
         if value is not None
     }
@@ -957,6 +958,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         help="PPO and recurrent PPO: passes over each rollout per update (10, SB3's default)",
+    )
+    train.add_argument(
+        "--ppo-hidden-layers",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="WIDTH",
+        help="PPO and recurrent PPO: hidden layer widths of the actor and of the critic "
+        "(64 64, SB3's default; recurrent PPO: the layers after its LSTM)",
     )
     train.add_argument(
         "--ppo-gae-lambda",

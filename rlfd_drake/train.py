@@ -80,6 +80,8 @@ PPO_N_STEPS = 256
 PPO_GAE_LAMBDA = 0.95
 #: PPO's and recurrent PPO's passes over each rollout (SB3's default), unless a run sets them.
 PPO_EPOCHS = 10
+#: PPO's and recurrent PPO's hidden layer widths, actor and critic each (SB3's default).
+PPO_HIDDEN_LAYERS = (64, 64)
 
 
 @dataclass
@@ -178,6 +180,8 @@ class TrainConfig:
             how many steps of real returns an advantage weighs before it leans on the
             critic (about 1 / (1 - gamma * lambda) steps; 1 = Monte Carlo returns).
         ppo_epochs: PPO's passes over each rollout's data per update (minibatches of 64).
+        ppo_hidden_layers: PPO's hidden layer widths, the same for the actor and the
+            critic (each its own network; recurrent PPO: the layers after its LSTM).
         ppo_history: PPO only: the last N observations stacked as its input
             (``VecFrameStack``, newest last), a memory of the contact the policy has
             felt, as ``history`` is SAC's; 1 = the current observation alone (the
@@ -296,6 +300,7 @@ class TrainConfig:
     ppo_n_steps: int = PPO_N_STEPS
     ppo_gae_lambda: float = PPO_GAE_LAMBDA
     ppo_epochs: int = PPO_EPOCHS
+    ppo_hidden_layers: tuple[int, ...] = PPO_HIDDEN_LAYERS
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
@@ -362,10 +367,12 @@ class TrainConfig:
             )
         if not (np.isfinite(self.ppo_gae_lambda) and 0.0 < self.ppo_gae_lambda <= 1.0):
             raise ValueError(f"ppo_gae_lambda must be in (0, 1], got {self.ppo_gae_lambda}")
+        self._check_ppo_hidden_layers()
         for name, default in (
             ("ppo_n_steps", PPO_N_STEPS),
             ("ppo_gae_lambda", PPO_GAE_LAMBDA),
             ("ppo_epochs", PPO_EPOCHS),
+            ("ppo_hidden_layers", PPO_HIDDEN_LAYERS),
         ):
             if self.algo == "sac" and getattr(self, name) != default:  # SAC does not roll out
                 raise ValueError(
@@ -457,6 +464,21 @@ class TrainConfig:
             DISCOUNT,
             self.distance_shaping_axes,
         )
+
+    def _check_ppo_hidden_layers(self) -> None:
+        layers = self.ppo_hidden_layers
+        if isinstance(layers, (str, bytes)) or not hasattr(layers, "__iter__"):
+            raise ValueError(f"ppo_hidden_layers must be a sequence of widths, got {layers!r}")
+        layers = tuple(layers)
+        if not layers or not all(
+            isinstance(width, (int, np.integer)) and not isinstance(width, bool) and width >= 1
+            for width in layers
+        ):
+            raise ValueError(
+                f"ppo_hidden_layers must be one or more integer widths >= 1, got {layers!r}"
+            )
+        # frozen: set once, as the tuple a list of widths means
+        object.__setattr__(self, "ppo_hidden_layers", tuple(int(width) for width in layers))
 
     def _check_log_std_final(self) -> None:
         if not np.isfinite(self.log_std_final):
@@ -697,7 +719,9 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             policy,
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
-            policy_kwargs=dict(net_arch=[64, 64], log_std_init=config.log_std_init, **reading),
+            policy_kwargs=dict(
+                net_arch=list(config.ppo_hidden_layers), log_std_init=config.log_std_init, **reading
+            ),
             **rollout,
             **common,
         )
@@ -736,7 +760,12 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
 
         model = RecurrentPPO(
             "MlpLstmPolicy",
-            policy_kwargs=dict(lstm_hidden_size=40, log_std_init=config.log_std_init, **inputs),
+            policy_kwargs=dict(
+                lstm_hidden_size=40,
+                net_arch=list(config.ppo_hidden_layers),
+                log_std_init=config.log_std_init,
+                **inputs,
+            ),
             **rollout,
             **common,
         )

@@ -393,6 +393,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     defaults = seen["c"]
     assert (defaults.ppo_n_steps, defaults.ppo_gae_lambda, defaults.ppo_epochs) == (256, 0.95, 10)
     assert defaults.log_std_final is None and defaults.log_std_init == -4.0
+    assert defaults.ppo_hidden_layers == (64, 64)
     accepted = [
         (ppo, ["--ppo-sde-sample-steps", "20"], "ppo_sde_sample_steps", 20),
         (ppo, ["--ppo-history", "4"], "ppo_history", 4),
@@ -402,6 +403,8 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (recurrent, ["--ppo-gae-lambda", "1"], "ppo_gae_lambda", 1.0),
         (ppo, ["--ppo-epochs", "5"], "ppo_epochs", 5),
         (ppo, ["--log-std-final", "-3"], "log_std_final", -3.0),
+        (ppo, ["--ppo-hidden-layers", "256", "256"], "ppo_hidden_layers", (256, 256)),
+        (recurrent, ["--ppo-hidden-layers", "32"], "ppo_hidden_layers", (32,)),
     ]
     for command, flags, field, value in accepted:
         assert main([*command, *flags, "--out", "unused"]) == 0, flags
@@ -429,6 +432,16 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
             "cannot schedule gSDE's noise (ppo_sde_sample_steps=20)",
         ),
         (ppo, ["--ppo-history", "0"], "ppo_history must be >= 1, got 0"),
+        (
+            ppo,
+            ["--ppo-hidden-layers", "64", "0"],
+            "ppo_hidden_layers must be one or more integer widths >= 1, got (64, 0)",
+        ),
+        (
+            sac,
+            ["--ppo-hidden-layers", "256", "256"],
+            "ppo_hidden_layers=(256, 256) needs algo 'ppo', got 'sac'",
+        ),
     ]
     for command, flags, message in refused:
         assert main([*command, *flags, "--out", "unused"]) == 2, flags

@@ -63,6 +63,33 @@ def test_ppo_two_updates_change_the_policy():
         assert _changed(before, model)
 
 
+def _hidden_widths(network) -> list[int]:
+    return [layer.out_features for layer in network if isinstance(layer, torch.nn.Linear)]
+
+
+def test_ppo_hidden_layers_shape_actor_and_critic(tmp_path):
+    """The widths reach both networks, for PPO and recurrent PPO; the residual still
+    starts at zero, and a saved policy loads back with its widths."""
+    obs = np.random.default_rng(0).normal(size=(3, 26)).astype(np.float32)
+    for algo, layers in (("ppo", (32, 16, 8)), ("recurrent_ppo", (24,))):
+        config = TrainConfig(algo=algo, envs=1, ppo_n_steps=16, ppo_hidden_layers=list(layers))
+        assert config.ppo_hidden_layers == layers  # a list is taken as the tuple it means
+        model = make_model(config, fast_venv(), None)
+        extractor = model.policy.mlp_extractor
+        assert _hidden_widths(extractor.policy_net) == list(layers)
+        assert _hidden_widths(extractor.value_net) == list(layers)
+        actions, _ = model.predict(obs, deterministic=True)
+        np.testing.assert_array_equal(actions, 0.0)
+    model.save(tmp_path / "policy.zip")
+    loaded = load_model(tmp_path / "policy.zip")
+    assert _hidden_widths(loaded.policy.mlp_extractor.policy_net) == [24]
+    for bad in ((), (64, 0), (64, 2.5), "64", 64, (True,)):
+        with pytest.raises(ValueError, match="ppo_hidden_layers must be"):
+            TrainConfig(algo="ppo", ppo_hidden_layers=bad)
+    with pytest.raises(ValueError, match=r"ppo_hidden_layers=\(8,\) needs algo 'ppo'"):
+        TrainConfig(algo="sac", ppo_hidden_layers=(8,))
+
+
 def _monte_carlo_gap(model) -> float:
     """Largest gap from R_t = r_t + gamma R_(t+1) (within an episode) in the last rollout:
     the recursion GAE's returns obey at lambda = 1 and not below it (they mix in V)."""
