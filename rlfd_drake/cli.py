@@ -449,6 +449,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         timeout_terminal=args.timeout_terminal,
         imitate=args.imitate,
         privileged_critic=args.privileged_critic,
+        self_imitation_batches=args.self_imitation_batches,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
         sac_correlated_noise=tuple(args.sac_correlated_noise),
@@ -1153,6 +1154,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="PPO's critic also reads the part's pose from the fixture's true goal and the "
         "fixture's error (simulation only; an asymmetric actor-critic, a deviation); the "
         "actor reads the observation alone, as it runs in the diagram",
+    )
+    train.add_argument(
+        "--self-imitation-batches",
+        type=int,
+        default=0,
+        metavar="N",
+        help="PPO: N self-imitation minibatches of 64 steps after each PPO update, drawn "
+        "from every finished episode so far (Oh et al. 2018; a deviation from the paper's "
+        "PPO); 0 = off",
     )
     train.add_argument("--out", help="run folder (default runs/<task>_<algo>_s<seed>)")
     train.add_argument("--resume", action="store_true", help="continue the run in --out")

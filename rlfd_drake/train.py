@@ -67,6 +67,7 @@ from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
 from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
 from rlfd_drake.results import format_json, invoked_command, utc_now
 from rlfd_drake.run_log import read_episode_rows
+from rlfd_drake.self_imitation import SelfImitation
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
 
@@ -278,6 +279,10 @@ class TrainConfig:
             ``privileged_critic.PrivilegedCriticPolicy``: an asymmetric actor-critic,
             Pinto et al. 2018), its actor only the observation, as it runs in the
             diagram; False = the paper's PPO, whose critic reads what the actor reads.
+        self_imitation_batches: PPO only: self-imitation minibatches (of 64 stored
+            steps) after each PPO update (``self_imitation.SelfImitation``, Oh et al.
+            2018: the policy is pulled towards stored actions whose return beat the
+            critic's value); 0 = off (the paper's PPO).
     """
 
     task: str = "peg_easy"
@@ -328,6 +333,7 @@ class TrainConfig:
     imitation_episodes: int = 100
     imitation_epochs: int = 100
     privileged_critic: bool = False
+    self_imitation_batches: int = 0
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -454,6 +460,15 @@ class TrainConfig:
             self._check_imitation()
         if self.privileged_critic:
             self._check_privileged_critic()
+        if self.self_imitation_batches < 0:
+            raise ValueError(
+                f"self_imitation_batches must be >= 0, got {self.self_imitation_batches}"
+            )
+        if self.self_imitation_batches > 0 and self.algo != "ppo":
+            raise ValueError(
+                f"self_imitation_batches={self.self_imitation_batches} cannot go with algo "
+                f"{self.algo!r} (it replays PPO's rollouts without a recurrent state)"
+            )
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -1030,6 +1045,10 @@ def train(
         callbacks.append(
             ExplorationNoiseSchedule(config.log_std_init, config.log_std_final, progress)
         )
+    self_imitation = None
+    if config.self_imitation_batches > 0:
+        self_imitation = SelfImitation(config.self_imitation_batches, seed=config.seed)
+        callbacks.append(self_imitation)
     if config.eval_every_episodes > 0:
         eval_env = make_envs(config, 1, config.seed + 10_000)
         callbacks.append(
@@ -1072,6 +1091,10 @@ def train(
         "gradient_updates": int(getattr(model, "_n_updates", 0)),
         "date": utc_now(),  # when training finished
     }
+    if self_imitation is not None:
+        # This process's only: a resumed run starts the store empty.
+        metrics["self_imitation_updates"] = self_imitation.updates
+        metrics["self_imitation_stored_steps"] = len(self_imitation.returns)
     if checkpoint is not None:
         # The earlier processes' time is not known (they were stopped before writing
         # metrics), so the wall time is this process's and says so.

@@ -971,3 +971,11 @@ def test_a_run_with_a_falling_noise_saves_a_policy_with_less_noise(tmp_path):
     log_std = load_model(tmp_path / "run" / "policy.zip").policy.log_std
     # Rollouts after the first episode sample at -3 (half the run) or lower.
     assert torch.all(log_std <= -3.0 + 1e-6) and torch.all(log_std >= -4.0 - 1e-6)
+
+
+def test_a_run_with_self_imitation_stores_its_episodes(tmp_path):
+    """`train` wires self-imitation in and says what it did."""
+    config = TrainConfig(algo="ppo", episodes=2, envs=1, ppo_n_steps=8, self_imitation_batches=3)
+    metrics = train(config, tmp_path / "run", progress_bar=False)
+    assert 0 < metrics["self_imitation_stored_steps"] <= metrics["timesteps"]
+    assert metrics["self_imitation_updates"] % 3 == 0  # whole rounds of minibatches
