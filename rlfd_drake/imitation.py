@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from rlfd_drake.base_correction import make_base_correction
+from rlfd_drake.self_imitation import discounted_returns
 
 __all__ = ["TeacherEpisodes", "collect_teacher_episodes", "fit_policy_to_teacher"]
 
@@ -41,14 +42,6 @@ class TeacherEpisodes:
     @property
     def episodes(self) -> int:
         return int(self.successes.size)
-
-
-def _returns_to_go(rewards: list[float], gamma: float) -> list[float]:
-    total, out = 0.0, []
-    for reward in reversed(rewards):
-        total = reward + gamma * total
-        out.append(total)
-    return out[::-1]
 
 
 def collect_teacher_episodes(venv, teacher_name: str, episodes: int, gamma: float):
@@ -93,7 +86,7 @@ def collect_teacher_episodes(venv, teacher_name: str, episodes: int, gamma: floa
                     (
                         trajectory["obs"],
                         trajectory["actions"],
-                        _returns_to_go(trajectory["rewards"], gamma),
+                        discounted_returns(trajectory["rewards"], gamma),
                     )
                 )
                 successes.append(bool(infos[i].get("success", False)))

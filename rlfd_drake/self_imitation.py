@@ -146,8 +146,8 @@ class SelfImitation(BaseCallback):
         self.returns = np.concatenate([self.returns, returns])[-CAPACITY:]
 
     def _on_rollout_start(self) -> None:
-        if self.model.num_timesteps == 0 or self.observations is None:
-            return  # no PPO update yet, or nothing stored
+        if self.observations is None:
+            return  # nothing stored: before the first rollout, or none has ended an episode
         policy = self.model.policy
         with torch.no_grad():
             values = policy.predict_values(torch.as_tensor(self.observations)).flatten().numpy()

@@ -464,10 +464,11 @@ class TrainConfig:
             raise ValueError(
                 f"self_imitation_batches must be >= 0, got {self.self_imitation_batches}"
             )
-        if self.self_imitation_batches > 0 and self.algo != "ppo":
-            raise ValueError(
-                f"self_imitation_batches={self.self_imitation_batches} cannot go with algo "
-                f"{self.algo!r} (it replays PPO's rollouts without a recurrent state)"
+        if self.self_imitation_batches > 0:
+            why = f"{self.algo!r} (it replays PPO's rollouts without a recurrent state)"
+            _refuse_conflicts(
+                f"self_imitation_batches={self.self_imitation_batches}",
+                {"algo": (self.algo != "ppo", why)},
             )
         check_reward_terms(
             self.force_limit_penalty,

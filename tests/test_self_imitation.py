@@ -58,7 +58,6 @@ def _filled(model, returns_above_value: float, action: np.ndarray) -> SelfImitat
         values = model.policy.predict_values(torch.as_tensor(observations)).flatten().numpy()
     actions = np.repeat(action[None], 64, axis=0).astype(np.float32)
     callback._store(observations, actions, values + returns_above_value)
-    model.num_timesteps = 1  # as after a PPO update
     return callback
 
 
