@@ -400,8 +400,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from rlfd_drake.train import TrainConfig, train
 
-    # Only a given --ppo-n-steps / --ppo-gae-lambda / --ppo-epochs / --ppo-hidden-layers
-    # reaches the config, whose defaults they are.
+    # Only a given --ppo-n-steps / --ppo-gae-lambda / --ppo-epochs / --ppo-hidden-layers /
+    # --ppo-actor-layers reaches the config, whose defaults they are.
     ppo_rollout = {
         key: value
         for key, value in (
@@ -409,6 +409,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             ("ppo_gae_lambda", args.ppo_gae_lambda),
             ("ppo_epochs", args.ppo_epochs),
             ("ppo_hidden_layers", args.ppo_hidden_layers),
+            ("ppo_actor_layers", args.ppo_actor_layers),
         )
         if value is not None
     }
@@ -968,6 +969,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="WIDTH",
         help="PPO and recurrent PPO: hidden layer widths of the actor and of the critic "
         "(64 64, SB3's default; recurrent PPO: the layers after its LSTM)",
+    )
+    train.add_argument(
+        "--ppo-actor-layers",
+        type=int,
+        nargs="*",
+        default=None,
+        metavar="WIDTH",
+        help="PPO and recurrent PPO: the actor's own hidden widths (--ppo-hidden-layers "
+        "then shapes the critic alone); given with no widths, a linear actor",
     )
     train.add_argument(
         "--ppo-gae-lambda",

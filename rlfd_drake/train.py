@@ -183,6 +183,10 @@ class TrainConfig:
         ppo_epochs: PPO's passes over each rollout's data per update (minibatches of 64).
         ppo_hidden_layers: PPO's hidden layer widths, the same for the actor and the
             critic (each its own network; recurrent PPO: the layers after its LSTM).
+        ppo_actor_layers: the actor's hidden widths where they differ from the
+            critic's (``ppo_hidden_layers`` then shapes the critic alone); ``()`` is a
+            linear actor, whose mean action is a linear function of its (scaled)
+            observation; None: the same widths as the critic's.
         ppo_history: PPO only: the last N observations stacked as its input
             (``VecFrameStack``, newest last), a memory of the contact the policy has
             felt, as ``history`` is SAC's; 1 = the current observation alone (the
@@ -306,6 +310,7 @@ class TrainConfig:
     ppo_gae_lambda: float = PPO_GAE_LAMBDA
     ppo_epochs: int = PPO_EPOCHS
     ppo_hidden_layers: tuple[int, ...] = PPO_HIDDEN_LAYERS
+    ppo_actor_layers: tuple[int, ...] | None = None
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
@@ -373,12 +378,14 @@ class TrainConfig:
             )
         if not (np.isfinite(self.ppo_gae_lambda) and 0.0 < self.ppo_gae_lambda <= 1.0):
             raise ValueError(f"ppo_gae_lambda must be in (0, 1], got {self.ppo_gae_lambda}")
-        self._check_ppo_hidden_layers()
+        self._check_widths("ppo_hidden_layers", allow_none=False)
+        self._check_widths("ppo_actor_layers", allow_none=True)
         for name, default in (
             ("ppo_n_steps", PPO_N_STEPS),
             ("ppo_gae_lambda", PPO_GAE_LAMBDA),
             ("ppo_epochs", PPO_EPOCHS),
             ("ppo_hidden_layers", PPO_HIDDEN_LAYERS),
+            ("ppo_actor_layers", None),
         ):
             if self.algo == "sac" and getattr(self, name) != default:  # SAC does not roll out
                 raise ValueError(
@@ -481,20 +488,23 @@ class TrainConfig:
             self.distance_shaping_axes,
         )
 
-    def _check_ppo_hidden_layers(self) -> None:
-        layers = self.ppo_hidden_layers
+    def _check_widths(self, name: str, allow_none: bool) -> None:
+        """Hidden widths: the critic's (``ppo_hidden_layers``, one or more) or the
+        actor's (``ppo_actor_layers``: None, or none for a linear actor)."""
+        layers = getattr(self, name)
+        if allow_none and layers is None:
+            return
         if isinstance(layers, (str, bytes)) or not hasattr(layers, "__iter__"):
-            raise ValueError(f"ppo_hidden_layers must be a sequence of widths, got {layers!r}")
+            raise ValueError(f"{name} must be a sequence of widths, got {layers!r}")
         layers = tuple(layers)
-        if not layers or not all(
+        if (not layers and not allow_none) or not all(
             isinstance(width, (int, np.integer)) and not isinstance(width, bool) and width >= 1
             for width in layers
         ):
-            raise ValueError(
-                f"ppo_hidden_layers must be one or more integer widths >= 1, got {layers!r}"
-            )
+            what = "zero or more" if allow_none else "one or more"
+            raise ValueError(f"{name} must be {what} integer widths >= 1, got {layers!r}")
         # frozen: set once, as the tuple a list of widths means
-        object.__setattr__(self, "ppo_hidden_layers", tuple(int(width) for width in layers))
+        object.__setattr__(self, name, tuple(int(width) for width in layers))
 
     def _check_log_std_final(self) -> None:
         if not np.isfinite(self.log_std_final):
@@ -699,6 +709,14 @@ def zero_residual_output(model: BaseAlgorithm, log_std_init: float) -> None:
         layer.bias.zero_()
 
 
+def ppo_net_arch(config: TrainConfig) -> list[int] | dict[str, list[int]]:
+    """SB3's ``net_arch`` for PPO and recurrent PPO: one list of widths for the actor
+    and the critic, or each its own when the actor's differ (``[]``: a linear actor)."""
+    if config.ppo_actor_layers is None:
+        return list(config.ppo_hidden_layers)
+    return dict(pi=list(config.ppo_actor_layers), vf=list(config.ppo_hidden_layers))
+
+
 def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseAlgorithm:
     """A new SB3 model with the paper's architecture where it states one, logging to
     TensorBoard in ``tensorboard_dir``, or nowhere (and writing no files) for None."""
@@ -736,7 +754,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             use_sde=config.ppo_sde_sample_steps > 0,
             sde_sample_freq=config.ppo_sde_sample_steps or -1,
             policy_kwargs=dict(
-                net_arch=list(config.ppo_hidden_layers), log_std_init=config.log_std_init, **reading
+                net_arch=ppo_net_arch(config), log_std_init=config.log_std_init, **reading
             ),
             **rollout,
             **common,
@@ -778,7 +796,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             "MlpLstmPolicy",
             policy_kwargs=dict(
                 lstm_hidden_size=40,
-                net_arch=list(config.ppo_hidden_layers),
+                net_arch=ppo_net_arch(config),
                 log_std_init=config.log_std_init,
                 **inputs,
             ),
@@ -825,7 +843,7 @@ def copy_policy_parameters(source: BaseAlgorithm, target: BaseAlgorithm) -> None
         name
         for name, value in target_state.items()
         if name not in source_state or source_state[name].shape != value.shape
-    ]
+    ] + [name for name in source_state if name not in target_state]  # e.g. one more layer
     if mismatched:
         raise ValueError(f"init_from's networks do not match this run's: {mismatched[:4]}")
     target.policy.load_state_dict(source_state)

@@ -394,6 +394,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
     assert (defaults.ppo_n_steps, defaults.ppo_gae_lambda, defaults.ppo_epochs) == (256, 0.95, 10)
     assert defaults.log_std_final is None and defaults.log_std_init == -4.0
     assert defaults.ppo_hidden_layers == (64, 64) and defaults.self_imitation_batches == 0
+    assert defaults.ppo_actor_layers is None
     accepted = [
         (ppo, ["--ppo-sde-sample-steps", "20"], "ppo_sde_sample_steps", 20),
         (ppo, ["--ppo-history", "4"], "ppo_history", 4),
@@ -405,6 +406,8 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (ppo, ["--log-std-final", "-3"], "log_std_final", -3.0),
         (ppo, ["--ppo-hidden-layers", "256", "256"], "ppo_hidden_layers", (256, 256)),
         (recurrent, ["--ppo-hidden-layers", "32"], "ppo_hidden_layers", (32,)),
+        (ppo, ["--ppo-actor-layers"], "ppo_actor_layers", ()),
+        (recurrent, ["--ppo-actor-layers", "16"], "ppo_actor_layers", (16,)),
         (ppo, ["--self-imitation-batches", "8"], "self_imitation_batches", 8),
     ]
     for command, flags, field, value in accepted:
@@ -442,6 +445,12 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
             sac,
             ["--ppo-hidden-layers", "256", "256"],
             "ppo_hidden_layers=(256, 256) needs algo 'ppo', got 'sac'",
+        ),
+        (sac, ["--ppo-actor-layers"], "ppo_actor_layers=() needs algo 'ppo', got 'sac'"),
+        (
+            ppo,
+            ["--ppo-actor-layers", "0"],
+            "ppo_actor_layers must be zero or more integer widths >= 1, got (0,)",
         ),
         (
             recurrent,

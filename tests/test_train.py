@@ -90,6 +90,42 @@ def test_ppo_hidden_layers_shape_actor_and_critic(tmp_path):
         TrainConfig(algo="sac", ppo_hidden_layers=(8,))
 
 
+def test_ppo_actor_layers_shape_the_actor_alone(tmp_path):
+    """The actor's own widths leave the critic at ppo_hidden_layers'; no widths is a
+    linear actor: its mean action is an affine function of the scaled observation,
+    zero at the start, and it trains, saves and loads as a linear actor."""
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(3, 26)).astype(np.float32)
+    for algo, actor in (("ppo", (16,)), ("recurrent_ppo", ())):
+        config = TrainConfig(algo=algo, envs=1, ppo_n_steps=16, ppo_actor_layers=list(actor))
+        assert config.ppo_actor_layers == actor
+        model = make_model(config, fast_venv(), None)
+        extractor = model.policy.mlp_extractor
+        assert _hidden_widths(extractor.policy_net) == list(actor)
+        assert _hidden_widths(extractor.value_net) == [64, 64]
+        np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], 0.0)
+    linear = make_model(
+        TrainConfig(algo="ppo", envs=1, ppo_n_steps=16, ppo_actor_layers=()), fast_venv(), None
+    )
+    before = _parameters(linear)
+    linear.learn(total_timesteps=32)
+    assert _changed(before, linear)
+    linear.save(tmp_path / "linear.zip")
+    loaded = load_model(tmp_path / "linear.zip")
+    assert _hidden_widths(loaded.policy.mlp_extractor.policy_net) == []
+    # affine in the observation (no hidden layer): f(a) + f(b) = f(a + b) + f(0)
+    a, b = rng.normal(size=(2, 1, 26)).astype(np.float32) * 0.1
+    zero = np.zeros_like(a)
+    mean = [loaded.predict(x, deterministic=True)[0] for x in (a, b, a + b, zero)]
+    np.testing.assert_allclose(mean[0] + mean[1], mean[2] + mean[3], atol=1e-5)
+    assert np.abs(mean[0] - mean[3]).max() > 1e-4  # it did learn something
+    for bad in ((64, 0), (2.5,), "64", 64, (False,)):
+        with pytest.raises(ValueError, match="ppo_actor_layers must be"):
+            TrainConfig(algo="ppo", ppo_actor_layers=bad)
+    with pytest.raises(ValueError, match=r"ppo_actor_layers=\(\) needs algo 'ppo'"):
+        TrainConfig(algo="sac", ppo_actor_layers=())
+
+
 def _monte_carlo_gap(model) -> float:
     """Largest gap from R_t = r_t + gamma R_(t+1) (within an episode) in the last rollout:
     the recursion GAE's returns obey at lambda = 1 and not below it (they mix in V)."""
@@ -565,6 +601,12 @@ def test_init_from_starts_from_the_source_networks(tmp_path):
     ppo = make_model(TrainConfig(algo="ppo", envs=1), fast_venv(), None)
     with pytest.raises(ValueError, match="SAC policy, this run trains PPO"):
         copy_policy_parameters(source, ppo)
+    deeper = make_model(
+        TrainConfig(algo="ppo", envs=1, ppo_actor_layers=(64, 64, 64)), fast_venv(), None
+    )
+    for first, second in ((deeper, ppo), (ppo, deeper)):  # a layer more, a layer fewer
+        with pytest.raises(ValueError, match="init_from's networks do not match this run's"):
+            copy_policy_parameters(first, second)
     with pytest.raises(ValueError, match="init_from"):
         TrainConfig(init_from=str(tmp_path / "missing.zip"))
     with pytest.raises(ValueError, match="composition"):
