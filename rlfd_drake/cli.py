@@ -968,7 +968,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="WIDTH",
         help="PPO and recurrent PPO: hidden layer widths of the actor and of the critic "
-        "(64 64, SB3's default; recurrent PPO: the layers after its LSTM)",
+        "(64 64, SB3's default; recurrent PPO: the layers after its LSTM; the critic's "
+        "alone with --ppo-actor-layers)",
     )
     train.add_argument(
         "--ppo-actor-layers",

@@ -181,8 +181,9 @@ class TrainConfig:
             how many steps of real returns an advantage weighs before it leans on the
             critic (about 1 / (1 - gamma * lambda) steps; 1 = Monte Carlo returns).
         ppo_epochs: PPO's passes over each rollout's data per update (minibatches of 64).
-        ppo_hidden_layers: PPO's hidden layer widths, the same for the actor and the
-            critic (each its own network; recurrent PPO: the layers after its LSTM).
+        ppo_hidden_layers: PPO's hidden layer widths, the critic's and, unless
+            ``ppo_actor_layers`` sets its own, the actor's (each its own network;
+            recurrent PPO: the layers after its LSTM).
         ppo_actor_layers: the actor's hidden widths where they differ from the
             critic's (``ppo_hidden_layers`` then shapes the critic alone); ``()`` is a
             linear actor, whose mean action is a linear function of its (scaled)
@@ -378,8 +379,8 @@ class TrainConfig:
             )
         if not (np.isfinite(self.ppo_gae_lambda) and 0.0 < self.ppo_gae_lambda <= 1.0):
             raise ValueError(f"ppo_gae_lambda must be in (0, 1], got {self.ppo_gae_lambda}")
-        self._check_widths("ppo_hidden_layers", allow_none=False)
-        self._check_widths("ppo_actor_layers", allow_none=True)
+        self._check_widths("ppo_hidden_layers", actor=False)
+        self._check_widths("ppo_actor_layers", actor=True)
         for name, default in (
             ("ppo_n_steps", PPO_N_STEPS),
             ("ppo_gae_lambda", PPO_GAE_LAMBDA),
@@ -488,20 +489,21 @@ class TrainConfig:
             self.distance_shaping_axes,
         )
 
-    def _check_widths(self, name: str, allow_none: bool) -> None:
+    def _check_widths(self, name: str, actor: bool) -> None:
         """Hidden widths: the critic's (``ppo_hidden_layers``, one or more) or the
-        actor's (``ppo_actor_layers``: None, or none for a linear actor)."""
+        actor's (``ppo_actor_layers``: None for the critic's, or none for a linear
+        actor)."""
         layers = getattr(self, name)
-        if allow_none and layers is None:
+        if actor and layers is None:
             return
         if isinstance(layers, (str, bytes)) or not hasattr(layers, "__iter__"):
             raise ValueError(f"{name} must be a sequence of widths, got {layers!r}")
         layers = tuple(layers)
-        if (not layers and not allow_none) or not all(
+        if (not layers and not actor) or not all(
             isinstance(width, (int, np.integer)) and not isinstance(width, bool) and width >= 1
             for width in layers
         ):
-            what = "zero or more" if allow_none else "one or more"
+            what = "zero or more" if actor else "one or more"
             raise ValueError(f"{name} must be {what} integer widths >= 1, got {layers!r}")
         # frozen: set once, as the tuple a list of widths means
         object.__setattr__(self, name, tuple(int(width) for width in layers))
