@@ -450,6 +450,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         timeout_terminal=args.timeout_terminal,
         imitate=args.imitate,
         privileged_critic=args.privileged_critic,
+        mirror_symmetry=args.mirror_symmetry,
         self_imitation_batches=args.self_imitation_batches,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
@@ -1165,6 +1166,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="PPO's critic also reads the part's pose from the fixture's true goal and the "
         "fixture's error (simulation only; an asymmetric actor-critic, a deviation); the "
         "actor reads the observation alone, as it runs in the diagram",
+    )
+    train.add_argument(
+        "--mirror-symmetry",
+        action="store_true",
+        help="PPO: the policy is symmetric across the world's x-z plane (y -> -y): its mean "
+        "action is averaged with the mirror image of its action on the mirrored observation, "
+        "its value with the value there, so what one side of the hole teaches holds for the "
+        "other (a deviation from the paper's PPO); the task's fixture must sit on that plane",
     )
     train.add_argument(
         "--self-imitation-batches",

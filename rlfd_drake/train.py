@@ -57,6 +57,12 @@ from rlfd_drake.env import (
     TimeLimitAsTerminal,
     check_reward_terms,
 )
+from rlfd_drake.mirror_symmetry import (
+    MirrorSymmetricPolicy,
+    action_mirror_signs,
+    check_mirror_symmetric_task,
+    observation_mirror_signs,
+)
 from rlfd_drake.observation_scaling import (
     CONTACT_SCALES,
     CONTACT_TORQUE_PER_UNIT_NM,
@@ -288,6 +294,12 @@ class TrainConfig:
             steps) after each PPO update (``self_imitation.SelfImitation``, Oh et al.
             2018: the policy is pulled towards stored actions whose return beat the
             critic's value); 0 = off (the paper's PPO).
+        mirror_symmetry: PPO only: the actor's mean is equivariant and the critic's
+            value invariant under the mirror across the world's x-z plane
+            (``mirror_symmetry.MirrorSymmetricPolicy``: each is averaged with its value
+            on the mirrored observation), so what an episode teaches about one side of
+            the hole holds for the other; the task's scene must be symmetric across that
+            plane. False = the paper's PPO.
     """
 
     task: str = "peg_easy"
@@ -340,6 +352,7 @@ class TrainConfig:
     imitation_epochs: int = 100
     privileged_critic: bool = False
     self_imitation_batches: int = 0
+    mirror_symmetry: bool = False
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -478,6 +491,8 @@ class TrainConfig:
                 f"self_imitation_batches={self.self_imitation_batches}",
                 {"algo": (self.algo != "ppo", why)},
             )
+        if self.mirror_symmetry:
+            self._check_mirror_symmetry()
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -548,6 +563,28 @@ class TrainConfig:
             ),
         }
         _refuse_conflicts("privileged_critic", conflicts)
+
+    def _check_mirror_symmetry(self) -> None:
+        """ValueError naming the setting (or the task's field) that a mirror-symmetric
+        policy cannot go with."""
+        conflicts = {
+            "algo": (self.algo != "ppo", f"{self.algo!r} (it is PPO's actor-critic)"),
+            "privileged_critic": (
+                self.privileged_critic,
+                "set (its privileged entries have no mirror image here)",
+            ),
+            "ppo_sde_sample_steps": (
+                self.ppo_sde_sample_steps > 0,
+                f"{self.ppo_sde_sample_steps} (gSDE's noise map is not mirrored)",
+            ),
+            "composition": (
+                self.composition != "residual",
+                f"{self.composition!r} (its policy also flies the approach, which starts "
+                "off the mirror plane)",
+            ),
+        }
+        _refuse_conflicts("mirror_symmetry", conflicts)
+        check_mirror_symmetric_task(load_task(self.task))
 
     def _check_imitation(self) -> None:
         """ValueError naming the setting that imitation of a rule cannot go with."""
@@ -751,6 +788,13 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
         if config.privileged_critic:  # its own two input layers, with these scales
             policy = PrivilegedCriticPolicy
             reading = dict(privileged_size=PRIVILEGED_SIZE, observation_scales=scales)
+        if config.mirror_symmetry:
+            policy = MirrorSymmetricPolicy
+            reading = dict(
+                observation_signs=observation_mirror_signs(config.ppo_history),
+                action_signs=action_mirror_signs(config.residual_mode, config.applied_action_only),
+                **inputs,
+            )
         model = PPO(
             policy,
             use_sde=config.ppo_sde_sample_steps > 0,

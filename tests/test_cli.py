@@ -409,6 +409,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (ppo, ["--ppo-actor-layers"], "ppo_actor_layers", ()),
         (recurrent, ["--ppo-actor-layers", "16"], "ppo_actor_layers", (16,)),
         (ppo, ["--self-imitation-batches", "8"], "self_imitation_batches", 8),
+        (ppo, ["--mirror-symmetry"], "mirror_symmetry", True),
     ]
     for command, flags, field, value in accepted:
         assert main([*command, *flags, "--out", "unused"]) == 0, flags
@@ -456,6 +457,12 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
             recurrent,
             ["--self-imitation-batches", "4"],
             "self_imitation_batches=4 cannot go with algo 'recurrent_ppo'",
+        ),
+        (sac, ["--mirror-symmetry"], "mirror_symmetry cannot go with algo 'sac'"),
+        (
+            ppo,
+            ["--mirror-symmetry", "--privileged-critic"],
+            "mirror_symmetry cannot go with privileged_critic set",
         ),
     ]
     for command, flags, message in refused:
