@@ -11,13 +11,21 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from rlfd_drake.evaluate import EPISODE_GROUPINGS, joined_evaluation, success_by_group
+from rlfd_drake.evaluate import (
+    EPISODE_GROUPINGS,
+    FIXTURE_SIDES,
+    joined_evaluation,
+    stored_fixture_directions,
+    success_by_group,
+)
 from rlfd_drake.results import new_result_path, results_dir, utc_now, write_result
 
 __all__ = ["breakdown", "breakdown_markdown", "evaluation_labels", "load_evaluation"]
 
 #: Failure kinds shown in a breakdown's cells, in this order (the others are summed).
 _SHOWN_FAILURES = ("force_limit", "on_entrance", "jammed")
+#: The default groups of "fixture_direction": the four sides of the hole, named in rows.
+_SIDE_EDGES = EPISODE_GROUPINGS["fixture_direction"][2]
 
 
 def load_evaluation(path: str | Path) -> tuple[dict, dict]:
@@ -83,6 +91,12 @@ def breakdown(
     for label, path in zip(labels, evaluations, strict=True):
         record, result = load_evaluation(path)
         tasks.add(result.get("task"))
+        column = EPISODE_GROUPINGS[by][0]
+        if by == "fixture_direction" and column not in result["episode_table"]:
+            try:
+                result["episode_table"][column] = stored_fixture_directions(record, result)
+            except ValueError as error:
+                raise ValueError(f"evaluations: {str(path)!r}: {error}") from error
         columns.append(
             {
                 "label": label,
@@ -140,7 +154,9 @@ def breakdown_markdown(data: dict) -> str:
         if not counts:
             continue
         n = str(counts.pop()) if len(counts) == 1 else "differs"
-        lines.append(f"| {low:g} to {high:g} | {n} | " + " | ".join(cells) + " |")
+        sides = data["by"] == "fixture_direction" and tuple(edges) == _SIDE_EDGES
+        side = f" ({FIXTURE_SIDES[low]})" if sides else ""
+        lines.append(f"| {low:g} to {high:g}{side} | {n} | " + " | ".join(cells) + " |")
     lines.append(
         "| all | - | "
         + " | ".join(f"{100 * c['success_rate']:.1f} % of {c['episodes']}" for c in data["columns"])

@@ -1462,16 +1462,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     regroup.add_argument(
         "--by",
-        choices=["fixture_rotation", "fixture_position"],
+        choices=["fixture_rotation", "fixture_position", "fixture_direction"],
         default="fixture_rotation",
-        help="group by the fixture's rotation error (deg, table slope included) or "
-        "position error (mm)",
+        help="group by the fixture's rotation error (deg, table slope included), "
+        "position error (mm), or the side of the hole it moved to (the direction of its "
+        "position error in the world's x-y plane, deg in [-45, 315): 0 = +x, 90 = +y)",
     )
     regroup.add_argument(
         "--edges",
         nargs="+",
         type=float,
-        help="group edges (default: 0 1 1.5 2 2.5 inf deg or 0 1 2 3 inf mm)",
+        help="group edges (default: 0 1 1.5 2 2.5 inf deg, 0 1 2 3 inf mm, or the four "
+        "sides -45 45 135 225 315 deg)",
     )
     _add_stored_result_arguments(regroup, "breakdown")
     regroup.set_defaults(func=_cmd_breakdown)

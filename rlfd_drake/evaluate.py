@@ -395,7 +395,12 @@ def _binomial_std(p: float, n: int) -> float:
 EPISODE_GROUPINGS = {
     "fixture_position": ("fixture_error_mm", "mm", (0.0, 1.0, 2.0, 3.0, math.inf)),
     "fixture_rotation": ("fixture_error_deg", "deg", (0.0, 1.0, 1.5, 2.0, 2.5, math.inf)),
+    # The side of the hole the fixture moved to: the quarter of the world's x-y plane
+    # its position error points into (``fixture_direction_deg``).
+    "fixture_direction": ("fixture_error_direction_deg", "deg", (-45.0, 45.0, 135.0, 225.0, 315.0)),
 }
+#: The sides of the world's x-y plane that ``fixture_direction``'s default groups are.
+FIXTURE_SIDES = {-45.0: "+x", 45.0: "+y", 135.0: "-x", 225.0: "-y"}
 #: Edges (mm) of the fixture position error groups of :func:`success_by_fixture_error`.
 FIXTURE_ERROR_EDGES_MM = EPISODE_GROUPINGS["fixture_position"][2]
 
@@ -443,6 +448,43 @@ def success_by_group(
                 }
             )
     return groups
+
+
+def fixture_direction_deg(fixture_dp) -> float:
+    """The direction of a fixture position error in the world's x-y plane, deg, in
+    [-45, 315): 0 = +x, 90 = +y (0 for no lateral error)."""
+    angle = math.degrees(math.atan2(float(fixture_dp[1]), float(fixture_dp[0])))
+    return angle + 360.0 if angle < -45.0 else angle
+
+
+def stored_fixture_directions(record: dict, result: dict) -> list[float]:
+    """``fixture_error_direction_deg`` of an evaluation stored before its episode table
+    had that column: the starts are drawn again from the task its command names
+    (``--task``), its seed, episode count and grid, and checked against the stored
+    fixture errors' sizes.
+
+    Raises:
+        ValueError: the command names no task, or the starts drawn again are not the
+            stored ones (the task or the start sampling has changed since).
+    """
+    import shlex
+
+    words = shlex.split(record.get("command") or "")
+    if "--task" not in words[:-1]:
+        raise ValueError(
+            f"the evaluation stores no fixture directions and its command names no --task: "
+            f"{record.get('command')!r}"
+        )
+    task = load_task(words[words.index("--task") + 1])
+    specs = make_episode_specs(task, int(result["episodes"]), int(result["seed"]), result["grid"])
+    sizes = [1e3 * float(np.linalg.norm(s.fixture_dp)) for s in specs]
+    stored = result["episode_table"]["fixture_error_mm"]
+    if len(stored) != len(sizes) or np.max(np.abs(np.subtract(stored, sizes))) > 0.006:
+        raise ValueError(
+            f"the starts drawn again for {record.get('command')!r} are not the stored ones: "
+            "the task or the start sampling has changed since"
+        )
+    return [round(fixture_direction_deg(s.fixture_dp), 1) for s in specs]
 
 
 def success_by_fixture_error(
@@ -518,6 +560,9 @@ def _summarise(task: TaskSpec, specs: list[EpisodeSpec], results: list[EpisodeRe
         "rotation_offset_deg": [round(s.start_rotation_offset_deg, 2) for s in specs],
         "fixture_error_mm": [round(1e3 * float(np.linalg.norm(s.fixture_dp)), 2) for s in specs],
         "fixture_error_deg": [round(s.fixture_rotation_error_deg, 2) for s in specs],
+        "fixture_error_direction_deg": [
+            round(fixture_direction_deg(s.fixture_dp), 1) for s in specs
+        ],
         "success": [int(r.success) for r in results],
         "insertion_time_s": [
             None if math.isnan(r.insertion_time_s) else r.insertion_time_s for r in results

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 
 from rlfd_drake.baselines.random_policy import RandomResidualPolicy, ZeroPolicy
+from rlfd_drake.episode import make_episode_specs
 from rlfd_drake.evaluate import (
     RESULT_KEYS,
     _success_curve,
     evaluate,
     evaluation_markdown,
+    fixture_direction_deg,
     make_policy,
     result_from_json,
     shared_evaluation_workers,
@@ -28,6 +30,7 @@ from rlfd_drake.policies import (
     load_sb3_model,
 )
 from rlfd_drake.systems.observer import OBSERVATION_SIZE
+from rlfd_drake.tasks import load_task
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +64,10 @@ def test_evaluate_returns_the_documented_keys(dmp_result):
     assert 0.0 < r["peak_low_passed_force_n"] <= r["peak_force_n"]
     # Each episode dates its peak, within the simulated time, at a distance to the goal.
     table = r["episode_table"]
+    specs = make_episode_specs(load_task("peg_easy"), 4, 0, grid=True)
+    assert table["fixture_error_direction_deg"] == [
+        round(fixture_direction_deg(s.fixture_dp), 1) for s in specs
+    ]
     for when, distance in zip(
         table["peak_force_time_s"], table["peak_force_distance_mm"], strict=True
     ):
