@@ -434,6 +434,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         ppo_history=args.ppo_history,
         **ppo_rollout,
         sac_learning_starts=args.sac_learning_starts,
+        sac_critic_burn_in=args.sac_critic_burn_in,
         sac_initial_ent_coef=args.sac_initial_ent_coef,
         sac_gradient_steps=args.sac_gradient_steps,
         composition=args.composition,
@@ -1007,6 +1008,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="SAC: steps explored with the initial policy before the first update",
+    )
+    train.add_argument(
+        "--sac-critic-burn-in",
+        type=int,
+        default=0,
+        metavar="N",
+        help="SAC: its first N gradient steps update only the critic (the actor and the "
+        "entropy coefficient wait), so the actor first moves on a critic fitted to the "
+        "initial policy's returns; default 0: both from the first update",
     )
     train.add_argument(
         "--sac-initial-ent-coef",

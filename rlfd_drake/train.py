@@ -207,6 +207,12 @@ class TrainConfig:
             axis is exp(log_std_init) times the norm of that 64-unit layer.
         sac_learning_starts: SAC steps before its first update, explored with the
             initial (zero-mean) policy (see ResidualSAC).
+        sac_critic_burn_in: SAC's first N gradient steps update only the critic (the
+            actor and the entropy coefficient wait), so the actor first moves on a
+            critic fitted to the initial policy's returns (a burn-in, as for an
+            actor-critic started from a demonstration); 0 = SB3's SAC, both from the
+            first update (on the rate residual the actor then followed an unfitted
+            critic off the hole; section 52 of ``results/full_pose_study.md``).
         sac_gradient_steps: SAC updates after each step of the ``envs`` envs (1 with
             two envs: half an update per transition).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
@@ -327,6 +333,7 @@ class TrainConfig:
     ppo_history: int = 1
     ppo_sde_sample_steps: int = 0
     sac_learning_starts: int = 0
+    sac_critic_burn_in: int = 0
     sac_gradient_steps: int = 1
     sac_initial_ent_coef: float = 0.01
     sac_target_entropy: float | None = None
@@ -410,6 +417,14 @@ class TrainConfig:
             self._check_ppo_history()
         if self.sac_learning_starts < 0:
             raise ValueError(f"sac_learning_starts must be >= 0, got {self.sac_learning_starts}")
+        if int(self.sac_critic_burn_in) != self.sac_critic_burn_in or self.sac_critic_burn_in < 0:
+            raise ValueError(
+                f"sac_critic_burn_in must be an integer >= 0, got {self.sac_critic_burn_in}"
+            )
+        if self.sac_critic_burn_in and self.algo != "sac":
+            raise ValueError(
+                f"sac_critic_burn_in={self.sac_critic_burn_in} needs algo 'sac', got {self.algo!r}"
+            )
         if self.eval_every_episodes < 0:
             raise ValueError(f"eval_every_episodes must be >= 0, got {self.eval_every_episodes}")
         if self.applied_action_only and self.residual_mode not in RESIDUAL_PARTS:
@@ -697,8 +712,24 @@ class ResidualSAC(SAC):
     drift on a critic fitted to zeros (2 successes in 63 episodes against the DMP's
     ~30%). Saved models load as plain SAC."""
 
+    #: Gradient steps, from the first, in which only the critic learns
+    #: (``TrainConfig.sac_critic_burn_in``); 0 = none (SB3's SAC).
+    critic_burn_in: int = 0
+
     def _sample_action(self, learning_starts, action_noise=None, n_envs=1):
         return super()._sample_action(0, action_noise, n_envs)
+
+    def _update_learning_rate(self, optimizers) -> None:
+        """SB3 sets every optimiser's step before each batch of gradient steps; in the
+        critic's burn-in the actor's and the entropy coefficient's are 0 (Adam then
+        leaves their parameters as they are), so the critic fits the initial policy's
+        values before the actor follows it."""
+        super()._update_learning_rate(optimizers)
+        if self._n_updates < self.critic_burn_in:
+            for optimizer in (self.actor.optimizer, self.ent_coef_optimizer):
+                if optimizer is not None:
+                    for group in optimizer.param_groups:
+                        group["lr"] = 0.0
 
 
 def exploration_noise(
@@ -835,6 +866,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             ),
             **common,
         )
+        model.critic_burn_in = int(config.sac_critic_burn_in)
     else:
         from sb3_contrib import RecurrentPPO
 
@@ -1032,6 +1064,16 @@ def start_from_teacher(model: BaseAlgorithm, config: TrainConfig) -> dict:
     }
 
 
+def resumed_model(config: TrainConfig, checkpoint: Path, venv) -> BaseAlgorithm:
+    """A run's checkpoint loaded to go on training: SAC as ResidualSAC, so that its
+    warm-up and its critic's burn-in (counted in the checkpoint's updates) go on."""
+    algorithm = ResidualSAC if config.algo == "sac" else type(load_model(checkpoint))
+    model = algorithm.load(str(checkpoint), env=venv, device="cpu")
+    if config.algo == "sac":
+        model.critic_burn_in = int(config.sac_critic_burn_in)
+    return model
+
+
 def _newest_checkpoint(run_dir: Path) -> Path | None:
     checkpoints = sorted(
         (run_dir / "checkpoints").glob("*_steps.zip"),
@@ -1079,7 +1121,7 @@ def train(
     venv = make_envs(config, config.envs, config.seed)
     checkpoint = _newest_checkpoint(run_dir) if resume else None
     if checkpoint is not None:
-        model = type(load_model(checkpoint)).load(str(checkpoint), env=venv, device="cpu")
+        model = resumed_model(config, checkpoint, venv)
     else:
         model = make_model(config, venv, run_dir / "tb")
         if config.init_from is not None:

@@ -410,6 +410,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (recurrent, ["--ppo-actor-layers", "16"], "ppo_actor_layers", (16,)),
         (ppo, ["--self-imitation-batches", "8"], "self_imitation_batches", 8),
         (ppo, ["--mirror-symmetry"], "mirror_symmetry", True),
+        (sac, ["--sac-critic-burn-in", "8000"], "sac_critic_burn_in", 8000),
     ]
     for command, flags, field, value in accepted:
         assert main([*command, *flags, "--out", "unused"]) == 0, flags
@@ -459,6 +460,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
             "self_imitation_batches=4 cannot go with algo 'recurrent_ppo'",
         ),
         (sac, ["--mirror-symmetry"], "mirror_symmetry cannot go with algo 'sac'"),
+        (ppo, ["--sac-critic-burn-in", "10"], "sac_critic_burn_in=10 needs algo 'sac'"),
         (
             ppo,
             ["--mirror-symmetry", "--privileged-critic"],

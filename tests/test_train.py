@@ -22,9 +22,11 @@ from rlfd_drake.train import (
     EveryNEpisodes,
     ExplorationNoiseSchedule,
     LinearDecayOverEpisodes,
+    ResidualSAC,
     TrainConfig,
     load_model,
     make_model,
+    resumed_model,
     train,
 )
 
@@ -333,6 +335,36 @@ def test_sac_gradient_steps_set_the_updates_per_step():
     assert model.gradient_steps == 3
     model.learn(total_timesteps=6)
     assert model._n_updates == 3 * 2  # steps 5 and 6, three updates each
+
+
+def test_sac_critic_burn_in_holds_the_actor_while_the_critic_learns(tmp_path):
+    """In the burn-in only the critic's parameters move; after it the actor's do too."""
+    config = TrainConfig(algo="sac", envs=1, history=1, sac_learning_starts=4, sac_critic_burn_in=6)
+    model = make_model(config, fast_venv(), None)
+    assert model.critic_burn_in == 6
+
+    def snapshot(module):
+        return [p.detach().clone() for p in module.parameters()]
+
+    def moved(before, module) -> bool:
+        return any(not torch.equal(a, b) for a, b in zip(before, module.parameters(), strict=True))
+
+    actor, critic, alpha = snapshot(model.actor), snapshot(model.critic), model.log_ent_coef.item()
+    model.learn(total_timesteps=10)  # updates after steps 5-10: 6, all in the burn-in
+    assert model._n_updates == 6
+    assert not moved(actor, model.actor) and model.log_ent_coef.item() == alpha
+    assert moved(critic, model.critic)
+    model.learn(total_timesteps=2, reset_num_timesteps=False)  # past it
+    assert moved(actor, model.actor) and model.log_ent_coef.item() != alpha
+    model.save(tmp_path / "checkpoint.zip")
+    resumed = resumed_model(config, tmp_path / "checkpoint.zip", fast_venv())
+    assert type(resumed) is ResidualSAC and resumed.critic_burn_in == 6
+    assert resumed._n_updates == model._n_updates  # the burn-in counts on
+    for bad in (-1, 2.5):
+        with pytest.raises(ValueError, match="sac_critic_burn_in must be an integer >= 0"):
+            TrainConfig(algo="sac", sac_critic_burn_in=bad)
+    with pytest.raises(ValueError, match="sac_critic_burn_in=10 needs algo 'sac', got 'ppo'"):
+        TrainConfig(algo="ppo", sac_critic_burn_in=10)
 
 
 def test_a_task_variant_trains_from_its_yaml():
