@@ -212,7 +212,8 @@ class TrainConfig:
             critic fitted to the initial policy's returns (a burn-in, as for an
             actor-critic started from a demonstration); 0 = SB3's SAC, both from the
             first update (on the rate residual the actor then followed an unfitted
-            critic off the hole; section 52 of ``results/full_pose_study.md``).
+            critic off the hole; section 52 of ``results/full_pose_study.md``; a
+            10,000-step burn-in only delayed that collapse: section 57).
         sac_gradient_steps: SAC updates after each step of the ``envs`` envs (1 with
             two envs: half an update per transition).
         sac_initial_ent_coef: initial value of SAC's automatically tuned entropy
@@ -305,7 +306,8 @@ class TrainConfig:
             (``mirror_symmetry.MirrorSymmetricPolicy``: each is averaged with its value
             on the mirrored observation), so what an episode teaches about one side of
             the hole holds for the other; the task's scene must be symmetric across that
-            plane. False = the paper's PPO.
+            plane (on peg from zero it evened +y and -y but lost starts on +x: section
+            56 of ``results/full_pose_study.md``). False = the paper's PPO.
     """
 
     task: str = "peg_easy"
