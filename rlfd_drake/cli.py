@@ -452,6 +452,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         imitate=args.imitate,
         privileged_critic=args.privileged_critic,
         mirror_symmetry=args.mirror_symmetry,
+        hidden_observation=tuple(args.hide_observation),
         self_imitation_batches=args.self_imitation_batches,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
@@ -1176,6 +1177,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="PPO's critic also reads the part's pose from the fixture's true goal and the "
         "fixture's error (simulation only; an asymmetric actor-critic, a deviation); the "
         "actor reads the observation alone, as it runs in the diagram",
+    )
+    train.add_argument(
+        "--hide-observation",
+        type=int,
+        nargs="+",
+        default=[],
+        metavar="I",
+        help="with --scaled-observation: observation entries the networks do not read "
+        "(indices into the 26 of systems/observer.py; e.g. 0 1 20 21: the lateral position "
+        "error and the rate residual's held lateral offset), in training and where the "
+        "policy runs (a deviation)",
     )
     train.add_argument(
         "--mirror-symmetry",

@@ -59,6 +59,21 @@ def contact_scales(torque_per_unit_nm: float = CONTACT_TORQUE_PER_UNIT_NM) -> tu
     return tuple(scales)
 
 
+def check_hidden_entries(hidden) -> tuple[int, ...]:
+    """``hidden`` as a tuple of distinct observation indices in [0, 26), or a ValueError
+    naming it."""
+    entries = tuple(hidden) if not isinstance(hidden, (str, bytes)) else (hidden,)
+    if not all(
+        isinstance(i, (int, np.integer)) and not isinstance(i, bool) and 0 <= i < OBSERVATION_SIZE
+        for i in entries
+    ) or len(set(entries)) != len(entries):
+        raise ValueError(
+            f"hidden observation entries must be distinct integers in [0, {OBSERVATION_SIZE}), "
+            f"got {hidden!r}"
+        )
+    return tuple(int(i) for i in entries)
+
+
 class ScaledObservation(BaseFeaturesExtractor):
     """Multiplies each observation entry by a fixed scale (no trainable parameters).
 
@@ -66,10 +81,13 @@ class ScaledObservation(BaseFeaturesExtractor):
     the per-step scales over the stack. ``privileged_size`` entries appended after the
     stack (``env.PrivilegedObservation``, for a critic) keep their units, or are
     zeroed with ``hide_privileged`` (the actor's reading of the same observation).
+    ``hidden`` entries of each observation (indices into the 26, every stacked step) are
+    zeroed: the networks do not read them, in training or where the policy runs.
 
     Raises:
         ValueError: the space is not a flat Box whose size less ``privileged_size`` is a
-            multiple of the scales', or a scale is not a positive finite number.
+            multiple of the scales', a scale is not a positive finite number, or a hidden
+            entry is not a distinct index of the observation.
     """
 
     def __init__(
@@ -78,6 +96,7 @@ class ScaledObservation(BaseFeaturesExtractor):
         scales=CONTACT_SCALES,
         privileged_size: int = 0,
         hide_privileged: bool = False,
+        hidden: tuple[int, ...] = (),
     ):
         if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
             raise ValueError(f"observation_space must be a flat Box, got {observation_space}")
@@ -95,6 +114,9 @@ class ScaledObservation(BaseFeaturesExtractor):
             )
         if not (np.all(np.isfinite(per_step)) and np.all(per_step > 0)):
             raise ValueError(f"scales must be positive finite numbers, got {per_step.tolist()}")
+        hidden = check_hidden_entries(hidden)
+        per_step = per_step.copy()
+        per_step[list(hidden)] = 0.0
         super().__init__(observation_space, features_dim=size)
         tail = np.full(privileged_size, 0.0 if hide_privileged else 1.0, np.float32)
         all_scales = np.concatenate([np.tile(per_step, stacked // per_step.size), tail])

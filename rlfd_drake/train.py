@@ -67,6 +67,7 @@ from rlfd_drake.observation_scaling import (
     CONTACT_SCALES,
     CONTACT_TORQUE_PER_UNIT_NM,
     ScaledObservation,
+    check_hidden_entries,
     contact_scales,
 )
 from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
@@ -308,6 +309,12 @@ class TrainConfig:
             the hole holds for the other; the task's scene must be symmetric across that
             plane (on peg from zero it evened +y and -y but lost starts on +x: section
             56 of ``results/full_pose_study.md``). False = the paper's PPO.
+        hidden_observation: observation entries (indices into the 26 of
+            ``systems/observer.py``) that the networks do not read (their fixed input
+            scale is 0, in training and where the policy runs); needs
+            ``scaled_observation``. E.g. 0 1 20 21: the lateral position error and the
+            rate residual's held lateral offset, so a search cannot feed on its own
+            integrated offset. () = the whole observation (the paper's).
     """
 
     task: str = "peg_easy"
@@ -362,6 +369,7 @@ class TrainConfig:
     privileged_critic: bool = False
     self_imitation_batches: int = 0
     mirror_symmetry: bool = False
+    hidden_observation: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -510,6 +518,25 @@ class TrainConfig:
             )
         if self.mirror_symmetry:
             self._check_mirror_symmetry()
+        try:
+            hidden = check_hidden_entries(self.hidden_observation)
+        except ValueError as error:
+            raise ValueError(f"hidden_observation: {error}") from error
+        object.__setattr__(self, "hidden_observation", hidden)  # the tuple a list means
+        if hidden:
+            _refuse_conflicts(
+                f"hidden_observation={hidden}",
+                {
+                    "scaled_observation": (
+                        not self.scaled_observation,
+                        "off (the hidden entries are zeroed by its input layer)",
+                    ),
+                    "privileged_critic": (
+                        self.privileged_critic,
+                        "set (its input layers read the whole observation)",
+                    ),
+                },
+            )
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -795,7 +822,9 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
     scales = contact_scales(config.contact_torque_nm) if config.scaled_observation else None
     inputs = (
         dict(
-            features_extractor_class=ScaledObservation, features_extractor_kwargs={"scales": scales}
+            features_extractor_class=ScaledObservation,
+            features_extractor_kwargs={"scales": scales}
+            | ({"hidden": config.hidden_observation} if config.hidden_observation else {}),
         )
         if scales is not None
         else {}

@@ -411,6 +411,12 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (ppo, ["--self-imitation-batches", "8"], "self_imitation_batches", 8),
         (ppo, ["--mirror-symmetry"], "mirror_symmetry", True),
         (sac, ["--sac-critic-burn-in", "8000"], "sac_critic_burn_in", 8000),
+        (
+            [*ppo, "--scaled-observation"],
+            ["--hide-observation", "0", "1", "20", "21"],
+            "hidden_observation",
+            (0, 1, 20, 21),
+        ),
     ]
     for command, flags, field, value in accepted:
         assert main([*command, *flags, "--out", "unused"]) == 0, flags
@@ -461,6 +467,12 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         ),
         (sac, ["--mirror-symmetry"], "mirror_symmetry cannot go with algo 'sac'"),
         (ppo, ["--sac-critic-burn-in", "10"], "sac_critic_burn_in=10 needs algo 'sac'"),
+        (ppo, ["--hide-observation", "0"], "hidden_observation=(0,) cannot go with scaled_obs"),
+        (
+            [*ppo, "--scaled-observation"],
+            ["--hide-observation", "26"],
+            "hidden observation entries must be distinct integers in [0, 26), got (26,)",
+        ),
         (
             ppo,
             ["--mirror-symmetry", "--privileged-critic"],

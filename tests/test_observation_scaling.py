@@ -116,3 +116,35 @@ def test_unscaled_training_keeps_the_plain_input():
     venv = DummyVecEnv([lambda: RlfdEnv("peg_easy", diagram_config=fast)])
     model = make_model(TrainConfig(algo="ppo", envs=1), venv, None)
     assert not isinstance(model.policy.features_extractor, ScaledObservation)
+
+
+def test_hidden_entries_are_never_read_in_training_or_where_the_policy_runs(tmp_path):
+    """Hidden entries are zeroed in every stacked frame; a trained, saved and deployed
+    policy's action does not change with them, and bad entries are named."""
+    layer = ScaledObservation(_box(2 * OBSERVATION_SIZE), hidden=(0, 20))
+    scales = layer.scales.reshape(2, OBSERVATION_SIZE)
+    assert torch.all(scales[:, [0, 20]] == 0.0) and torch.all(scales[:, 1] == CONTACT_SCALES[1])
+    fast = RlfdDiagramConfig(residual_activation_s=0.3)
+    venv = DummyVecEnv([lambda: RlfdEnv("peg_easy", diagram_config=fast)])
+    config = TrainConfig(
+        algo="ppo", envs=1, ppo_n_steps=16, scaled_observation=True, hidden_observation=[0, 1, 20]
+    )
+    assert config.hidden_observation == (0, 1, 20)
+    model = make_model(config, venv, None)
+    model.learn(total_timesteps=32)
+    model.save(tmp_path / "hidden.zip")
+    deployed = DeployedPolicy(load_sb3_model(str(tmp_path / "hidden.zip"))[0])
+    with torch.no_grad():  # a trained policy whose output depends on what it reads
+        for parameter in deployed.model.policy.action_net.parameters():
+            parameter.normal_(0.0, 0.3)
+    obs = np.random.default_rng(3).normal(size=OBSERVATION_SIZE).astype(np.float32)
+    changed = obs.copy()
+    changed[[0, 1, 20]] += 5.0
+    np.testing.assert_array_equal(deployed(obs), deployed(changed))
+    changed[2] += 5.0  # an entry it reads
+    assert np.abs(deployed(obs) - deployed(changed)).max() > 1e-4
+    for bad in ((26,), (3, 3), (-1,), (1.5,)):
+        with pytest.raises(ValueError, match="hidden observation entries must be distinct"):
+            TrainConfig(scaled_observation=True, hidden_observation=bad)
+    with pytest.raises(ValueError, match=r"hidden_observation=\(0,\) cannot go with"):
+        TrainConfig(hidden_observation=(0,))
