@@ -453,6 +453,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         privileged_critic=args.privileged_critic,
         mirror_symmetry=args.mirror_symmetry,
         hidden_observation=tuple(args.hide_observation),
+        lateral_log_std_init=args.lateral_log_std_init,
         self_imitation_batches=args.self_imitation_batches,
         scaled_observation=args.scaled_observation,
         applied_action_only=args.applied_action_only,
@@ -1053,6 +1054,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=-1.5,
         help="initial log std of the policy's Gaussian (-1.5: a std of 0.22 of the "
         "residual's range; RJ-45's 30 N limit needs smaller, e.g. -3)",
+    )
+    train.add_argument(
+        "--lateral-log-std-init",
+        type=float,
+        default=None,
+        help="PPO: the initial log std of the residual's lateral translation (world x "
+        "and y) instead of --log-std-init, which depth and orientation keep",
     )
     train.add_argument(
         "--log-std-final",

@@ -315,6 +315,12 @@ class TrainConfig:
             ``scaled_observation``. E.g. 0 1 20 21: the lateral position error and the
             rate residual's held lateral offset, so a search cannot feed on its own
             integrated offset. () = the whole observation (the paper's).
+        lateral_log_std_init: PPO only: the initial log std of the residual's lateral
+            translation (world x and y, the action's entries 0 and 1) instead of
+            ``log_std_init``, which the other entries keep: more (or less) exploration
+            of where the hole lies without more noise on depth and orientation, which
+            press (a larger noise on every entry did: section 38). None = one log
+            std for every entry, as SB3 and the paper.
     """
 
     task: str = "peg_easy"
@@ -370,6 +376,7 @@ class TrainConfig:
     self_imitation_batches: int = 0
     mirror_symmetry: bool = False
     hidden_observation: tuple[int, ...] = ()
+    lateral_log_std_init: float | None = None
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
@@ -537,6 +544,8 @@ class TrainConfig:
                     ),
                 },
             )
+        if self.lateral_log_std_init is not None:
+            self._check_lateral_log_std_init()
         check_reward_terms(
             self.force_limit_penalty,
             self.peak_force_cost,
@@ -580,6 +589,38 @@ class TrainConfig:
                 f"log_std_final={self.log_std_final} cannot schedule gSDE's noise "
                 f"(ppo_sde_sample_steps={self.ppo_sde_sample_steps}): give one or the other"
             )
+
+    def _check_lateral_log_std_init(self) -> None:
+        value = self.lateral_log_std_init
+        if not np.isfinite(value):
+            raise ValueError(f"lateral_log_std_init must be finite, got {value}")
+        _refuse_conflicts(
+            f"lateral_log_std_init={value}",
+            {
+                "algo": (self.algo != "ppo", f"{self.algo!r} (needs 'ppo')"),
+                "residual_mode": (
+                    self.residual_mode not in ("full", "translation"),
+                    f"{self.residual_mode!r} (no lateral translation to explore)",
+                ),
+                "log_std_final": (
+                    self.log_std_final is not None,
+                    f"{self.log_std_final} (its schedule sets every entry)",
+                ),
+                "ppo_sde_sample_steps": (
+                    self.ppo_sde_sample_steps > 0,
+                    f"{self.ppo_sde_sample_steps} (gSDE's noise is a matrix, not a log std "
+                    "per entry)",
+                ),
+                "init_from": (
+                    self.init_from is not None,
+                    f"{self.init_from!r} (the copied policy brings its own noise)",
+                ),
+                "imitate": (
+                    self.imitate is not None,
+                    f"{self.imitate!r} (the copy starts from its teacher's noise)",
+                ),
+            },
+        )
 
     def _check_ppo_history(self) -> None:
         """ValueError naming the setting that PPO's stacked history cannot go with."""
@@ -913,6 +954,9 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
             **common,
         )
     zero_residual_output(model, config.log_std_init)
+    if config.lateral_log_std_init is not None:
+        with torch.no_grad():  # world x and y lead both action layouts (6-D and 3-D)
+            model.policy.log_std[:2] = config.lateral_log_std_init
     if tensorboard_dir is None:
         # Without it, every learn() of SB3 makes an empty folder tmp/SB3-<time> for a
         # logger that writes nothing (verbose 0): a test suite left dozens behind.

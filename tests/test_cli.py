@@ -411,6 +411,7 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
         (ppo, ["--self-imitation-batches", "8"], "self_imitation_batches", 8),
         (ppo, ["--mirror-symmetry"], "mirror_symmetry", True),
         (sac, ["--sac-critic-burn-in", "8000"], "sac_critic_burn_in", 8000),
+        (ppo, ["--lateral-log-std-init", "-1.5"], "lateral_log_std_init", -1.5),
         (
             [*ppo, "--scaled-observation"],
             ["--hide-observation", "0", "1", "20", "21"],
@@ -444,6 +445,27 @@ def test_train_flags_reach_the_training_configuration(monkeypatch, capsys):
             "cannot schedule gSDE's noise (ppo_sde_sample_steps=20)",
         ),
         (ppo, ["--ppo-history", "0"], "ppo_history must be >= 1, got 0"),
+        (
+            sac,
+            ["--lateral-log-std-init", "-1.5"],
+            "lateral_log_std_init=-1.5 cannot go with algo 'sac' (needs 'ppo')",
+        ),
+        (
+            ppo,
+            ["--lateral-log-std-init", "-1.5", "--residual-mode", "orientation"],
+            "lateral_log_std_init=-1.5 cannot go with residual_mode 'orientation'",
+        ),
+        (
+            ppo,
+            ["--lateral-log-std-init", "-1.5", "--log-std-final", "-3"],
+            "lateral_log_std_init=-1.5 cannot go with log_std_final -3.0",
+        ),
+        (
+            ppo,
+            ["--lateral-log-std-init", "-1.5", "--ppo-sde-sample-steps", "20"],
+            "lateral_log_std_init=-1.5 cannot go with ppo_sde_sample_steps 20",
+        ),
+        (ppo, ["--lateral-log-std-init", "nan"], "lateral_log_std_init must be finite, got nan"),
         (
             ppo,
             ["--ppo-hidden-layers", "64", "0"],

@@ -1047,6 +1047,23 @@ def test_a_run_with_a_falling_noise_saves_a_policy_with_less_noise(tmp_path):
     assert torch.all(log_std <= -3.0 + 1e-6) and torch.all(log_std >= -4.0 - 1e-6)
 
 
+def test_a_lateral_log_std_explores_only_x_and_y_more(tmp_path):
+    """The lateral entries start at their own log std, the rest at log_std_init, and
+    both stay learned parameters (moved only by the optimiser's small steps)."""
+    config = TrainConfig(
+        algo="ppo", episodes=2, envs=1, ppo_n_steps=8, log_std_init=-2.0, lateral_log_std_init=-1.0
+    )
+    built = make_model(config, fast_venv(), None).policy.log_std
+    assert built.tolist() == [-1.0, -1.0, -2.0, -2.0, -2.0, -2.0]
+    assert built.requires_grad
+    train(config, tmp_path / "run", progress_bar=False)
+    trained = load_model(tmp_path / "run" / "policy.zip").policy.log_std.detach()
+    assert torch.allclose(trained[:2], torch.tensor(-1.0), atol=0.05)
+    assert torch.allclose(trained[2:], torch.tensor(-2.0), atol=0.05)
+    with pytest.raises(ValueError, match="cannot go with init_from"):
+        TrainConfig(lateral_log_std_init=-1.0, init_from=str(tmp_path / "run" / "policy.zip"))
+
+
 def test_a_run_with_self_imitation_stores_its_episodes(tmp_path):
     """`train` wires self-imitation in and says what it did."""
     config = TrainConfig(algo="ppo", episodes=2, envs=1, ppo_n_steps=8, self_imitation_batches=3)
