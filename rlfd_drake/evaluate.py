@@ -468,7 +468,6 @@ def stored_fixture_directions(record: dict, result: dict) -> list[float]:
         ValueError: the command names no task, or the starts drawn again are not the
             stored ones (the task or the start sampling has changed since).
     """
-
     words = shlex.split(record.get("command") or "")
     if "--task" not in words[:-1]:
         raise ValueError(

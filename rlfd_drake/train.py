@@ -864,8 +864,7 @@ def make_model(config: TrainConfig, venv, tensorboard_dir: Path | None) -> BaseA
     inputs = (
         dict(
             features_extractor_class=ScaledObservation,
-            features_extractor_kwargs={"scales": scales}
-            | ({"hidden": config.hidden_observation} if config.hidden_observation else {}),
+            features_extractor_kwargs={"scales": scales, "hidden": config.hidden_observation},
         )
         if scales is not None
         else {}
