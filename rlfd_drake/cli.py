@@ -731,8 +731,32 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stored_evaluation(path: str) -> dict:
+    """The evaluation stored by ``rlfd evaluate`` at ``path`` (its per-start table
+    joined), or a ValueError naming the file."""
+    from rlfd_drake.evaluate import result_from_json
+
+    if not Path(path).is_file():
+        raise ValueError(f"results: no evaluation file at {path!r}")
+    try:
+        result = result_from_json(path)
+        result["task"]
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"results: {path!r} is not an evaluation JSON ({error})") from error
+    return result
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from rlfd_drake.evaluate import evaluation_markdown
+
+    # Read every file before printing any, so a bad path prints nothing half-way.
+    results = [_stored_evaluation(path) for path in args.results]
+    print("\n".join(evaluation_markdown(result) for result in results), end="")
+    return 0
+
+
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from rlfd_drake.evaluate import plot_peak_forces, plot_success_panels, result_from_json
+    from rlfd_drake.evaluate import plot_peak_forces, plot_success_panels
 
     out = Path(args.out)
     if out.suffix.lower() != ".png":
@@ -746,14 +770,8 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         )
     panels: dict[str, list[tuple[str, dict]]] = {}
     for label, path in zip(labels, args.results, strict=True):
-        if not Path(path).is_file():
-            raise ValueError(f"results: no evaluation file at {path!r}")
-        try:
-            result = result_from_json(path)
-            task = result["task"]
-        except (ValueError, KeyError, TypeError) as error:
-            raise ValueError(f"results: {path!r} is not an evaluation JSON ({error})") from error
-        panels.setdefault(task, []).append((label, result))
+        result = _stored_evaluation(path)
+        panels.setdefault(result["task"], []).append((label, result))
     draw = plot_success_panels if args.kind == "success" else plot_peak_forces
     print(f"wrote {draw(panels, out)}")
     return 0
@@ -1467,6 +1485,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(rlfd plot draws it, or several side by side, from the JSON later)",
     )
     evaluate.set_defaults(func=_cmd_evaluate)
+
+    show = sub.add_parser(
+        "show",
+        help="print stored evaluations (results/eval_*.json) as the Markdown tables "
+        "evaluate writes beside them (not tracked in git: this makes them again)",
+    )
+    show.add_argument("results", nargs="+", help="evaluation JSON files written by evaluate")
+    show.set_defaults(func=_cmd_show)
 
     plot = sub.add_parser(
         "plot", help="draw stored evaluations (results/eval_*.json): success or peak force"

@@ -339,6 +339,37 @@ def test_plot_draws_stored_evaluations_and_refuses_bad_input(tmp_path, capsys):
     assert not (tmp_path / "x.png").exists()
 
 
+@pytest.fixture
+def dmp_evaluation_files(tmp_path, monkeypatch, capsys):
+    """results/eval_show.json and .md as `rlfd evaluate` writes them: the DMP on two
+    peg_easy starts, in a scratch working directory."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["evaluate", "--task", "peg_easy", "--policy", "dmp", "--episodes", "2"]
+    assert main([*argv, "--seed", "0", "--workers", "1", "--name", "eval_show"]) == 0
+    capsys.readouterr()
+    return tmp_path / "results" / "eval_show.json", tmp_path / "results" / "eval_show.md"
+
+
+def test_show_prints_what_evaluate_wrote_beside_the_json(dmp_evaluation_files, capsys):
+    """rlfd show: git tracks each evaluation's JSON, not its Markdown rendering
+    (results/eval_*.md is ignored), so show must make the same text again from the
+    JSON and its per-start table, and name a file it cannot read."""
+    json_path, md_path = dmp_evaluation_files
+    assert main(["show", str(json_path)]) == 0
+    assert capsys.readouterr().out == md_path.read_text()
+    assert main(["show", str(json_path), str(json_path)]) == 0
+    assert capsys.readouterr().out == md_path.read_text() + "\n" + md_path.read_text()
+    table = Path(__file__).resolve().parents[1] / "results" / "table_1.json"
+    for path, message in (
+        (table, "is not an evaluation JSON"),
+        (json_path.with_name("none.json"), "results: no evaluation file at"),
+    ):
+        assert main(["show", str(json_path), str(path)]) == 2
+        captured = capsys.readouterr()
+        assert message in captured.err and str(path) in captured.err
+        assert captured.out == ""  # nothing printed before the bad file was found
+
+
 def test_bench_tasks_only_for_the_diagram_benchmark(capsys):
     assert main(["bench", "sim", "--tasks", "peg"]) == 2
     assert "--tasks: only the diagram benchmark takes tasks, not 'sim'" in capsys.readouterr().err
