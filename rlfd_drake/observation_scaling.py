@@ -62,7 +62,9 @@ def contact_scales(torque_per_unit_nm: float = CONTACT_TORQUE_PER_UNIT_NM) -> tu
 def check_hidden_entries(hidden) -> tuple[int, ...]:
     """``hidden`` as a tuple of distinct observation indices in [0, 26), or a ValueError
     naming it."""
-    entries = tuple(hidden) if not isinstance(hidden, (str, bytes)) else (hidden,)
+    # A bare number or string is one entry, not a sequence of them.
+    iterable = hasattr(hidden, "__iter__") and not isinstance(hidden, (str, bytes))
+    entries = tuple(hidden) if iterable else (hidden,)
     if not all(
         isinstance(i, (int, np.integer)) and not isinstance(i, bool) and 0 <= i < OBSERVATION_SIZE
         for i in entries

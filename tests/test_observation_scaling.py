@@ -143,7 +143,9 @@ def test_hidden_entries_are_never_read_in_training_or_where_the_policy_runs(tmp_
     np.testing.assert_array_equal(deployed(obs), deployed(changed))
     changed[2] += 5.0  # an entry it reads
     assert np.abs(deployed(obs) - deployed(changed)).max() > 1e-4
-    for bad in ((26,), (3, 3), (-1,), (1.5,)):
+    # A bare index is one entry (it raised a TypeError from tuple(3) before).
+    assert TrainConfig(scaled_observation=True, hidden_observation=3).hidden_observation == (3,)
+    for bad in ((26,), (3, 3), (-1,), (1.5,), 26, "0"):
         with pytest.raises(ValueError, match="hidden observation entries must be distinct"):
             TrainConfig(scaled_observation=True, hidden_observation=bad)
     with pytest.raises(ValueError, match=r"hidden_observation=\(0,\) cannot go with"):
