@@ -28,20 +28,19 @@ _SHOWN_FAILURES = ("force_limit", "on_entrance", "jammed")
 _SIDE_EDGES = EPISODE_GROUPINGS["fixture_direction"][2]
 
 
-def load_evaluation(path: str | Path) -> tuple[dict, dict]:
+def load_evaluation(path: str | Path, field: str = "evaluations") -> tuple[dict, dict]:
     """(the stored record, the evaluation with its episode table) of an evaluation JSON;
-    a ValueError names a missing file or one that is not an evaluation."""
+    a ValueError names ``field`` (the argument it came from) and a missing file or one
+    that is not an evaluation."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"evaluations: no evaluation file at {str(path)!r}")
+        raise ValueError(f"{field}: no evaluation file at {str(path)!r}")
     try:
         record = json.loads(path.read_text())
         result = joined_evaluation(record, path)
         result["episode_table"]  # noqa: B018 (an evaluation has one)
     except (ValueError, KeyError, TypeError, OSError, EOFError) as error:
-        raise ValueError(
-            f"evaluations: {str(path)!r} is not an evaluation JSON ({error})"
-        ) from error
+        raise ValueError(f"{field}: {str(path)!r} is not an evaluation JSON ({error})") from error
     return record, result
 
 

@@ -731,31 +731,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stored_evaluation(path: str) -> dict:
-    """The evaluation stored by ``rlfd evaluate`` at ``path`` (its per-start table
-    joined), or a ValueError naming the file."""
-    from rlfd_drake.evaluate import result_from_json
-
-    if not Path(path).is_file():
-        raise ValueError(f"results: no evaluation file at {path!r}")
-    try:
-        result = result_from_json(path)
-        result["task"]
-    except (ValueError, KeyError, TypeError) as error:
-        raise ValueError(f"results: {path!r} is not an evaluation JSON ({error})") from error
-    return result
-
-
 def _cmd_show(args: argparse.Namespace) -> int:
+    from rlfd_drake.breakdown import load_evaluation
     from rlfd_drake.evaluate import evaluation_markdown
 
     # Read every file before printing any, so a bad path prints nothing half-way.
-    results = [_stored_evaluation(path) for path in args.results]
+    results = [load_evaluation(path, field="results")[1] for path in args.results]
     print("\n".join(evaluation_markdown(result) for result in results), end="")
     return 0
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
+    from rlfd_drake.breakdown import load_evaluation
     from rlfd_drake.evaluate import plot_peak_forces, plot_success_panels
 
     out = Path(args.out)
@@ -770,7 +757,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         )
     panels: dict[str, list[tuple[str, dict]]] = {}
     for label, path in zip(labels, args.results, strict=True):
-        result = _stored_evaluation(path)
+        _, result = load_evaluation(path, field="results")
         panels.setdefault(result["task"], []).append((label, result))
     draw = plot_success_panels if args.kind == "success" else plot_peak_forces
     print(f"wrote {draw(panels, out)}")
