@@ -27,17 +27,24 @@ from pathlib import Path
 
 from rlfd_drake.policies import checkpoint_steps
 from rlfd_drake.results import format_json, new_result_path, results_dir, write_result
-from rlfd_drake.run_log import read_episode_log, read_episode_rows
+from rlfd_drake.run_log import read_episode_log, read_episode_rows, training_success_rates
 
 __all__ = [
     "Candidate",
     "check_validation_starts",
     "choose_candidate",
+    "chosen_policy_metrics",
     "run_candidates",
     "select_checkpoint",
     "selected_run_folder",
     "selection_markdown",
 ]
+
+
+#: metrics.json entries of a whole run that a chosen checkpoint's training does not share:
+#: kept in the selected folder as trained_<entry> (PPO's update count at a checkpoint is
+#: not logged, so the chosen policy has none of its own).
+_WHOLE_RUN_METRICS = ("success_rate_last_50", "success_rate_all", "gradient_updates")
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,23 @@ def choose_candidate(success_rates: list[float]) -> int:
         raise ValueError("success_rates: no candidate to choose from")
     best = max(success_rates)
     return max(i for i, rate in enumerate(success_rates) if rate == best)
+
+
+def chosen_policy_metrics(
+    run_metrics: dict, episode_rows: list[dict[str, str]], chosen: Candidate
+) -> dict:
+    """The metrics.json of a run's chosen checkpoint: the training steps, episodes and
+    training success up to it; the whole run's as trained_* (wall_time_s stays the
+    run's: choosing needed the whole run)."""
+    return {
+        **{key: value for key, value in run_metrics.items() if key not in _WHOLE_RUN_METRICS},
+        "episodes": chosen.episodes,
+        "timesteps": chosen.timesteps,
+        **training_success_rates(episode_rows, chosen.episodes),
+        "trained_episodes": run_metrics["episodes"],
+        "trained_timesteps": run_metrics["timesteps"],
+        **{f"trained_{key}": run_metrics[key] for key in _WHOLE_RUN_METRICS if key in run_metrics},
+    }
 
 
 def selected_run_folder(run_dir: str | Path) -> Path:
@@ -206,12 +230,7 @@ def select_checkpoint(
     shutil.copyfile(run_dir / "config.json", destination / "config.json")
     (destination / "episodes.csv").write_text(read_episode_log(run_dir))
     selected_metrics = {
-        **metrics,
-        # The chosen policy's training; the run's whole training is in trained_*.
-        "episodes": candidates[chosen].episodes,
-        "timesteps": candidates[chosen].timesteps,
-        "trained_episodes": metrics["episodes"],
-        "trained_timesteps": metrics["timesteps"],
+        **chosen_policy_metrics(metrics, read_episode_rows(run_dir), candidates[chosen]),
         "selection": {key: value for key, value in selection.items() if key != "candidates"},
         "selection_record": f"results/{name}.json",
     }

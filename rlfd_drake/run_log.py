@@ -24,6 +24,7 @@ __all__ = [
     "read_episode_rows",
     "run_log_file",
     "run_log_folders",
+    "training_success_rates",
 ]
 
 #: Files of a run folder that are copied as they are; config.json is required.
@@ -82,3 +83,14 @@ def read_episode_log(folder: str | Path) -> str:
 def read_episode_rows(folder: str | Path) -> list[dict[str, str]]:
     """The rows of :func:`read_episode_log`, one dict per episode, keyed by its header."""
     return list(csv.DictReader(io.StringIO(read_episode_log(folder))))
+
+
+def training_success_rates(rows: list[dict[str, str]], episodes: int | None = None) -> dict:
+    """``success_rate_last_50`` and ``success_rate_all`` of a run's episode log rows
+    (:func:`read_episode_rows`), over its first ``episodes`` episodes (None: all); 0.0
+    for no episode, as ``rlfd train`` writes them to metrics.json."""
+    successes = [int(row["success"]) for row in rows[:episodes]]
+    return {
+        "success_rate_last_50": sum(successes[-50:]) / len(successes[-50:]) if successes else 0.0,
+        "success_rate_all": sum(successes) / len(successes) if successes else 0.0,
+    }

@@ -73,7 +73,7 @@ from rlfd_drake.observation_scaling import (
 from rlfd_drake.policies import checkpoint_steps, load_sb3_model, policy_file
 from rlfd_drake.privileged_critic import PrivilegedCriticPolicy
 from rlfd_drake.results import format_json, invoked_command, utc_now
-from rlfd_drake.run_log import read_episode_rows
+from rlfd_drake.run_log import read_episode_rows, training_success_rates
 from rlfd_drake.self_imitation import SelfImitation
 from rlfd_drake.systems.observer import OBSERVATION_WRIST_TORQUE
 from rlfd_drake.tasks import load_task
@@ -1259,14 +1259,12 @@ def train(
     model.save(str(run_dir / "policy.zip"))
     venv.close()
     log = callbacks[0]
-    # Over the whole run: a resumed process saw only its own episodes.
-    successes = [int(row["success"]) for row in read_episode_rows(run_dir)]
     metrics = {
         "episodes": log.episodes,
         "timesteps": int(model.num_timesteps),
         "wall_time_s": wall,
-        "success_rate_last_50": float(np.mean(successes[-50:])) if successes else 0.0,
-        "success_rate_all": float(np.mean(successes)) if successes else 0.0,
+        # Over the whole run: a resumed process saw only its own episodes.
+        **training_success_rates(read_episode_rows(run_dir)),
         # A fine-tune whose episodes end before SAC's learning starts never updates: the
         # saved policy is then the copied one, and this says so.
         "gradient_updates": int(getattr(model, "_n_updates", 0)),

@@ -20,6 +20,7 @@ from rlfd_drake.seed_study import load_seed_run
 
 # (episode, timesteps at its end): checkpoints fire at 2, 4 and 6 finished episodes.
 EPISODE_ENDS = [(1, 50), (2, 80), (3, 130), (4, 150), (5, 200), (6, 230)]
+SUCCESSES = [0, 1, 1, 0, 1, 1]  # 2 of the first 4 episodes, 4 of all 6
 
 
 def _run(tmp_path, policy_bytes=b"final", name="recipe_s3", task="peg_easy"):
@@ -29,11 +30,11 @@ def _run(tmp_path, policy_bytes=b"final", name="recipe_s3", task="peg_easy"):
     (run / "checkpoints").mkdir(parents=True)
     config = {"task": task, "algo": "ppo", "seed": 3, "residual_mode": "translation"}
     (run / "config.json").write_text(json.dumps({"config": config, "command": "rlfd train"}))
-    (run / "metrics.json").write_text(
-        json.dumps({"episodes": 6, "timesteps": 230, "wall_time_s": 12.0})
-    )
+    metrics = {"episodes": 6, "timesteps": 230, "wall_time_s": 12.0, "gradient_updates": 30}
+    metrics |= {"success_rate_last_50": 4 / 6, "success_rate_all": 4 / 6}
+    (run / "metrics.json").write_text(json.dumps(metrics))
     lines = ["episode,timesteps,success,return,length"]
-    lines += [f"{e},{t},0,0.0,10" for e, t in EPISODE_ENDS]
+    lines += [f"{e},{t},{ok},0.0,10" for (e, t), ok in zip(EPISODE_ENDS, SUCCESSES, strict=True)]
     (run / "episodes.csv").write_text("\n".join(lines) + "\n")
     for steps in (80, 150, 230):
         (run / "checkpoints" / f"policy_{steps}_steps.zip").write_bytes(b"at %d" % steps)
@@ -107,6 +108,11 @@ def test_selection_writes_the_best_checkpoint_as_a_run_and_records_every_candida
     assert (chosen / "config.json").read_text() == (run / "config.json").read_text()
     metrics = json.loads((chosen / "metrics.json").read_text())
     assert (metrics["episodes"], metrics["trained_episodes"]) == (4, 6)
+    # Training success up to the chosen checkpoint; the whole run's as trained_*.
+    assert (metrics["success_rate_last_50"], metrics["success_rate_all"]) == (0.5, 0.5)
+    assert metrics["trained_success_rate_all"] == pytest.approx(4 / 6)
+    assert metrics["trained_gradient_updates"] == 30 and "gradient_updates" not in metrics
+    assert metrics["wall_time_s"] == 12.0  # the run the choice needed
     assert metrics["selection"]["validation_seed"] == 1
     # A run like any other for the seed study.
     assert load_seed_run(chosen).seed == 3

@@ -8,7 +8,12 @@ import json
 import pytest
 
 from rlfd_drake.cli import main
-from rlfd_drake.run_log import keep_run_log, read_episode_log
+from rlfd_drake.run_log import (
+    keep_run_log,
+    read_episode_log,
+    read_episode_rows,
+    training_success_rates,
+)
 
 EPISODES = "episode,timesteps,success,return,length\n1,42,1,1.0,21\n2,100,0,0.0,50\n"
 
@@ -66,3 +71,12 @@ def test_keep_refuses_to_overwrite_and_names_bad_input(run_dir, tmp_path, capsys
         read_episode_log(tmp_path)
     assert main(["keep", str(run_dir), str(run_dir), "--name", "x"]) == 2
     assert "--name names one run's log, got 2 runs" in capsys.readouterr().err
+
+
+def test_training_success_over_the_last_50_and_all_episodes_or_the_first_few(run_dir):
+    rows = read_episode_rows(run_dir)
+    assert training_success_rates(rows) == {"success_rate_last_50": 0.5, "success_rate_all": 0.5}
+    assert training_success_rates(rows, 1)["success_rate_all"] == 1.0
+    many = [{"success": str(int(i >= 50))} for i in range(100)]  # the last 50 succeed
+    assert training_success_rates(many) == {"success_rate_last_50": 1.0, "success_rate_all": 0.5}
+    assert training_success_rates([]) == {"success_rate_last_50": 0.0, "success_rate_all": 0.0}
